@@ -1,0 +1,151 @@
+"""Online estimation of the interaction pattern and its phase (chapter 5 future work):
+the joint posterior p(k, alpha | D) over mixture components k and phase-speed hypotheses
+alpha, updated recursively per observation, and the conditioned controlled-agent trajectory.
+
+Each hypothesis (k, alpha_m) keeps the Gaussian over the observed agent's weights given D and
+its log evidence log p(D | k, alpha_m) (eqs. 17-18), updated in Kalman form in O(P d^2) per
+observation. The basis rows psi(alpha_m t) are computed once per alpha and shared by every
+component. The controlled agent is recovered exactly only when asked for: since D depends
+on the observed weights alone, w_c | D follows from w_o | D through B_k = Sigma_co Sigma_oo^-1.
+"""
+
+import numpy as np
+from scipy import linalg
+
+from ._kalman import basis_rows, kalman_update
+from .interaction import trajectory_distribution
+from .phase import alpha_grid, alpha_log_prior
+
+
+class OnlineEstimator:
+    """Recursive p(k, alpha | D) for a fitted :class:`MixtureIProMP`.
+
+    ``min_interval`` (s): observations closer in time than this to the last one used are
+    skipped. Consecutive motion-capture samples are strongly correlated (the residual between
+    a person's path and the model is smooth), so feeding 100+ Hz as independent evidence
+    makes the posterior overconfident; 20 Hz is about the bandwidth of the residual.
+    """
+
+    def __init__(self, model, n_alpha: int = 50, min_interval: float = 0.05,
+                 alpha_range_std: float = 3.0):
+        model._check_fitted()
+        self.model = model
+        self.min_interval = float(min_interval)
+        K, N, P = model.n_components, model.n_basis, model.n_observed_
+        self.n_components, self.n_basis, self.n_observed = K, N, P
+        do = P * N
+        self.alphas = alpha_grid(model.alpha_mean_, model.alpha_std_, n_alpha, alpha_range_std)
+        M = len(self.alphas)
+        self._log_prior = (np.log(model.weights_)[:, None]
+                           + alpha_log_prior(self.alphas, model.alpha_mean_, model.alpha_std_)
+                           ).ravel()
+        self._mu0 = np.repeat(model.means_[:, :do], M, axis=0)
+        self._sigma0 = np.repeat(model.covariances_[:, :do, :do], M, axis=0)
+        self._psi_index = np.tile(np.arange(M), K)
+        self._noise = np.ascontiguousarray(model.observed_noise_var_, dtype=float)
+        # Regression of controlled on observed weights per component (exact conditioning).
+        self._gain, self._cond_cov = [], []
+        for k in range(K):
+            C = model.covariances_[k]
+            B = linalg.cho_solve(linalg.cho_factor(C[:do, :do], lower=True), C[:do, do:]).T
+            self._gain.append(B)
+            self._cond_cov.append(C[do:, do:] - B @ C[:do, do:])
+        self.reset()
+
+    def reset(self):
+        """Forget every observation: a new interaction starts (t = 0 at its onset)."""
+        self.mu = self._mu0.copy()
+        self.sigma = self._sigma0.copy()
+        self.log_evidence_flat = np.zeros(len(self._mu0))
+        self.n_observations = 0
+        self.t_last = None
+
+    def update(self, t: float, y) -> bool:
+        """Add the observed agent's position ``y`` (P,) at ``t`` seconds after onset.
+
+        Returns False (and changes nothing) when the sample is within ``min_interval`` of the
+        last one used. Raises ValueError for non-finite or misshaped input or time going back.
+        """
+        y = np.asarray(y, dtype=float)
+        if y.shape != (self.n_observed,):
+            raise ValueError(f'observation must have shape ({self.n_observed},), got {y.shape}')
+        if not np.all(np.isfinite(y)) or not np.isfinite(t):
+            raise ValueError('observation or time is NaN or Inf')
+        if t < 0:
+            raise ValueError(f'time {t} is before the onset (t must be >= 0)')
+        if self.t_last is not None:
+            if t <= self.t_last:
+                raise ValueError(f'time must increase: {t} after {self.t_last}')
+            if t - self.t_last < self.min_interval:
+                return False
+        psi = basis_rows(self.alphas * t, self.model.basis_.centers, self.model.basis_.width)
+        kalman_update(self.sigma, self.mu, self.log_evidence_flat, psi, self._psi_index, y,
+                      self._noise)
+        self.t_last = float(t)
+        self.n_observations += 1
+        return True
+
+    # ------------------------------------------------------------------ queries
+    @property
+    def log_evidence(self):
+        """log p(D | k, alpha_m), shape (K, M)."""
+        return self.log_evidence_flat.reshape(self.n_components, -1)
+
+    def joint_posterior(self):
+        """p(k, alpha_m | D), shape (K, M)."""
+        lp = self._log_prior + self.log_evidence_flat
+        p = np.exp(lp - lp.max())
+        return (p / p.sum()).reshape(self.n_components, -1)
+
+    def component_posterior(self):
+        """p(k | D) (eq. 11 with the phase marginalised)."""
+        return self.joint_posterior().sum(axis=1)
+
+    def alpha_posterior(self):
+        """p(alpha_m | D) (eq. 16 with the component marginalised)."""
+        return self.joint_posterior().sum(axis=0)
+
+    def map_hypothesis(self):
+        """(k*, alpha*): the most probable component (eq. 12) and, for it, the MAP alpha (eq. 20)."""
+        joint = self.joint_posterior()
+        k = int(np.argmax(joint.sum(axis=1)))
+        return k, float(self.alphas[int(np.argmax(joint[k]))])
+
+    def phase(self, t=None):
+        """Current phase z = alpha* t under the MAP hypothesis, clamped to [0, 1]."""
+        t = self.t_last if t is None else t
+        if t is None:
+            return 0.0
+        return float(np.clip(self.map_hypothesis()[1] * t, 0.0, 1.0))
+
+    def observed_weights(self, k, m):
+        """Posterior N(mean, cov) of the observed agent's weights under hypothesis (k, m)."""
+        h = k * len(self.alphas) + m
+        return self.mu[h], self.sigma[h]
+
+    def predict(self, z_grid, component=None, alpha=None):
+        """Conditioned trajectories under (k*, alpha*) (or the given ones) at phases ``z_grid``.
+
+        Returns a dict: 'time' (s since onset = z / alpha), 'component', 'alpha', 'controlled'
+        and 'observed', each a dict of 'position', 'velocity', 'acceleration' (len, n) and
+        'position_cov' (len, n, n).
+        """
+        k_map, a_map = self.map_hypothesis()
+        k = k_map if component is None else int(component)
+        if alpha is None:
+            m = int(np.argmax(self.joint_posterior()[k]))
+        else:
+            m = int(np.argmin(np.abs(self.alphas - alpha)))
+        a = float(self.alphas[m])
+        mu_o, sig_o = self.observed_weights(k, m)
+        do = mu_o.shape[0]
+        prior_mean = self.model.means_[k]
+        B = self._gain[k]
+        mean_c = prior_mean[do:] + B @ (mu_o - prior_mean[:do])
+        cov_c = self._cond_cov[k] + B @ sig_o @ B.T
+        z_grid = np.asarray(z_grid, dtype=float)
+        ctrl = trajectory_distribution(mean_c, 0.5 * (cov_c + cov_c.T), self.model.basis_,
+                                       z_grid, a)
+        obs = trajectory_distribution(mu_o, sig_o, self.model.basis_, z_grid, a)
+        return {'time': z_grid / a, 'component': k, 'alpha': a, 'controlled': ctrl,
+                'observed': obs}

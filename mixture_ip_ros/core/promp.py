@@ -1,0 +1,264 @@
+"""Probabilistic Movement Primitives: weights by ridge regression (eq. 14) and by EM from
+partially observed demonstrations (eqs. 21-33, appendix A).
+
+Weight layout, used everywhere in the package: the weight vector of D DOFs is
+[w_dof0 (N), w_dof1 (N), ...], so the position of DOF j at phase z is psi(z) . w[jN:(j+1)N].
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import linalg
+
+from .basis import GaussianBasis
+
+LOG_2PI = np.log(2.0 * np.pi)
+
+
+@dataclass
+class ObservationStats:
+    """Sufficient statistics of one partially observed trajectory under a basis.
+
+    Per DOF j: G[j] = A_j^T A_j (N x N), b[j] = A_j^T y_j, yy[j] = y_j^T y_j, m[j] = number of
+    observed samples, where A_j holds psi(z) at the samples where DOF j is observed (eq. 22).
+    Everything EM and the evidence need, so the (m x D*N) design matrix is never formed.
+    """
+
+    G: np.ndarray
+    b: np.ndarray
+    yy: np.ndarray
+    m: np.ndarray
+
+
+def observation_stats(basis: GaussianBasis, z, Y) -> ObservationStats:
+    """Statistics of samples Y (T, D) at phases z (T,); NaN entries are missing."""
+    z = np.asarray(z, dtype=float)
+    Y = np.asarray(Y, dtype=float)
+    if Y.ndim != 2 or Y.shape[0] != z.shape[0]:
+        raise ValueError(f'Y must have shape (len(z), dofs) = ({z.shape[0]}, D), got {Y.shape}')
+    psi = basis(z)
+    D, N = Y.shape[1], basis.n_basis
+    G = np.empty((D, N, N))
+    b = np.empty((D, N))
+    yy = np.empty(D)
+    m = np.empty(D)
+    observed = ~np.isnan(Y)
+    for j in range(D):
+        rows = observed[:, j]
+        A = psi[rows]
+        y = Y[rows, j]
+        G[j] = A.T @ A
+        b[j] = A.T @ y
+        yy[j] = y @ y
+        m[j] = rows.sum()
+    return ObservationStats(G, b, yy, m)
+
+
+def ridge_weights(basis: GaussianBasis, z, Y, ridge: float = 1e-6) -> np.ndarray:
+    """Eq. 14 solved per DOF with a ridge: w_j = (A^T A + ridge I)^-1 A^T y_j, stacked."""
+    st = observation_stats(basis, z, Y)
+    if np.any(st.m == 0):
+        raise ValueError('ridge regression needs at least one observed sample of every DOF')
+    N = basis.n_basis
+    eye = ridge * np.eye(N)
+    return np.concatenate([np.linalg.solve(st.G[j] + eye, st.b[j]) for j in range(len(st.m))])
+
+
+def block_diag_info(stats: ObservationStats, noise_var: np.ndarray):
+    """A^T R^-1 A (block diagonal, full matrix) and A^T R^-1 y for per-DOF noise variances."""
+    D, N = stats.b.shape
+    info = np.zeros((D * N, D * N))
+    for j in range(D):
+        info[j * N:(j + 1) * N, j * N:(j + 1) * N] = stats.G[j] / noise_var[j]
+    return info, (stats.b / noise_var[:, None]).ravel()
+
+
+def weight_posterior(stats: ObservationStats, mean, cov_chol, noise_var):
+    """Eqs. 27-28 and the marginal likelihood of eq. 21 for one trajectory.
+
+    ``cov_chol`` is the lower Cholesky factor of the prior covariance (from scipy cho_factor
+    with lower=True, i.e. a tuple). Returns (posterior mean, posterior covariance, log p(D)).
+    """
+    d = mean.shape[0]
+    info, eta = block_diag_info(stats, noise_var)
+    prior_prec = linalg.cho_solve(cov_chol, np.eye(d))
+    prec = prior_prec + info
+    prec_chol = linalg.cho_factor(prec, lower=True)
+    post_cov = linalg.cho_solve(prec_chol, np.eye(d))
+    post_cov = 0.5 * (post_cov + post_cov.T)
+    innov = eta - info @ mean                       # A^T R^-1 (y - A mu)
+    post_mean = mean + post_cov @ innov
+    D, N = stats.b.shape
+    mu = mean.reshape(D, N)
+    rr = np.sum((stats.yy - 2 * np.einsum('jn,jn->j', mu, stats.b)
+                 + np.einsum('jn,jnk,jk->j', mu, stats.G, mu)) / noise_var)
+    logdet_prior = 2 * np.sum(np.log(np.diag(cov_chol[0])))
+    logdet_prec = 2 * np.sum(np.log(np.diag(prec_chol[0])))
+    m_total = stats.m.sum()
+    loglik = -0.5 * (m_total * LOG_2PI + np.sum(stats.m * np.log(noise_var))
+                     + logdet_prior + logdet_prec + rr - innov @ post_cov @ innov)
+    return post_mean, post_cov, loglik
+
+
+def expected_sq_residual(stats: ObservationStats, post_mean, post_cov):
+    """Per DOF E[||y_j - A_j w_j||^2] under the weight posterior (M step for the noise)."""
+    D, N = stats.b.shape
+    out = np.empty(D)
+    for j in range(D):
+        s = slice(j * N, (j + 1) * N)
+        w = post_mean[s]
+        out[j] = (stats.yy[j] - 2 * w @ stats.b[j] + w @ stats.G[j] @ w
+                  + np.sum(stats.G[j] * post_cov[s, s]))
+    return out
+
+
+def covariance_penalty(cov_chol, prior_cov_diag, strength):
+    """log of the conjugate covariance prior used to regularise: -s/2 (tr(Omega Sigma^-1) + log|Sigma|)."""
+    if strength == 0:
+        return 0.0
+    inv_diag = np.diag(linalg.cho_solve(cov_chol, np.eye(cov_chol[0].shape[0])))
+    logdet = 2 * np.sum(np.log(np.diag(cov_chol[0])))
+    return -0.5 * strength * (np.sum(prior_cov_diag * inv_diag) + logdet)
+
+
+class ProMP:
+    """A ProMP over D DOFs: Gaussian over stacked weights, learned from demonstrations.
+
+    ``method='regression'`` fits every trajectory alone (eq. 14) and takes the sample mean and
+    covariance (the thesis's baseline; needs every DOF observed in every trajectory).
+    ``method='em'`` maximises eq. 21 over mean, covariance and per-DOF noise with EM
+    (eqs. 27-30), using every partial observation of every trajectory together.
+
+    The covariance is regularised by a conjugate prior (``prior_strength`` pseudo-samples of a
+    diagonal covariance ``prior_scale`` times the per-weight variance of the data), so it stays
+    positive definite with fewer trajectories than weights. EM then increases the penalised
+    log-likelihood monotonically; ``log_likelihood_`` records it per iteration.
+    """
+
+    def __init__(self, n_basis: int = 15, method: str = 'em', ridge: float = 1e-6,
+                 prior_strength: float = 1.0, prior_scale: float = 0.01, max_iter: int = 200,
+                 tol: float = 1e-6, min_noise_var: float = 1e-8):
+        if method not in ('em', 'regression'):
+            raise ValueError(f"method must be 'em' or 'regression', got {method!r}")
+        self.n_basis = n_basis
+        self.method = method
+        self.ridge = ridge
+        self.prior_strength = prior_strength
+        self.prior_scale = prior_scale
+        self.max_iter = max_iter
+        self.tol = tol
+        self.min_noise_var = min_noise_var
+
+    def fit(self, trajectories):
+        """``trajectories``: list of (z, Y) with z (T,) phases in [0, 1] and Y (T, D), NaN = missing."""
+        trajectories = _validate_trajectories(trajectories)
+        self.basis_ = GaussianBasis(self.n_basis)
+        self.n_dofs_ = trajectories[0][1].shape[1]
+        stats = [observation_stats(self.basis_, z, Y) for z, Y in trajectories]
+        W = self._regression_init(trajectories)
+        d = W.shape[1]
+        var = W.var(axis=0) if len(W) > 1 else np.ones(d)
+        self.prior_cov_diag_ = self.prior_scale * np.maximum(var, 1e-12 * max(var.max(), 1e-12))
+        self.mean_ = W.mean(axis=0)
+        S = (W - self.mean_).T @ (W - self.mean_)
+        n = len(W)
+        self.cov_ = _regularised_cov(S, n, self.prior_cov_diag_, self.prior_strength)
+        self.noise_var_ = self._residual_var(stats, W)
+        self.log_likelihood_ = []
+        self.n_iter_ = 0
+        if self.method == 'em':
+            self._em(stats)
+        return self
+
+    def _regression_init(self, trajectories):
+        """Per-trajectory eq. 14 weights; for EM only a starting point (a DOF never observed in a
+        trajectory starts at the mean of the others)."""
+        N = self.basis_.n_basis
+        ridge = self.ridge if self.method == 'regression' else max(self.ridge, 1e-2)
+        W = np.full((len(trajectories), self.n_dofs_ * N), np.nan)
+        for i, (z, Y) in enumerate(trajectories):
+            st = observation_stats(self.basis_, z, Y)
+            for j in range(self.n_dofs_):
+                if st.m[j] > 0:
+                    W[i, j * N:(j + 1) * N] = np.linalg.solve(st.G[j] + ridge * np.eye(N), st.b[j])
+                elif self.method == 'regression':
+                    raise ValueError("method='regression' needs every DOF observed in every "
+                                     "trajectory; use method='em' for missing data")
+        col_mean = np.nanmean(W, axis=0)
+        if np.any(np.isnan(col_mean)):
+            raise ValueError('some DOF is not observed in any trajectory')
+        return np.where(np.isnan(W), col_mean, W)
+
+    def _residual_var(self, stats, W):
+        num = np.zeros(self.n_dofs_)
+        den = np.zeros(self.n_dofs_)
+        zero = np.zeros((W.shape[1], W.shape[1]))
+        for st, w in zip(stats, W):
+            num += expected_sq_residual(st, w, zero)
+            den += st.m
+        return np.maximum(num / np.maximum(den, 1), self.min_noise_var)
+
+    def _em(self, stats):
+        d = self.mean_.shape[0]
+        prev = -np.inf
+        for it in range(self.max_iter):
+            chol = linalg.cho_factor(self.cov_, lower=True)
+            results = [weight_posterior(st, self.mean_, chol, self.noise_var_) for st in stats]
+            ll = sum(r[2] for r in results) + covariance_penalty(
+                chol, self.prior_cov_diag_, self.prior_strength)
+            self.log_likelihood_.append(float(ll))
+            self.n_iter_ = it + 1
+            if ll - prev < self.tol * max(1.0, abs(ll)):
+                break
+            prev = ll
+            means = np.array([r[0] for r in results])
+            mean = means.mean(axis=0)                                        # eq. 29
+            E = means - mean
+            S = E.T @ E + sum(r[1] for r in results)                         # eq. 30
+            self.mean_ = mean
+            self.cov_ = _regularised_cov(S, len(stats), self.prior_cov_diag_, self.prior_strength)
+            num = sum(expected_sq_residual(st, r[0], r[1]) for st, r in zip(stats, results))
+            den = sum(st.m for st in stats)
+            self.noise_var_ = np.maximum(num / np.maximum(den, 1), self.min_noise_var)
+        return self
+
+    def trajectory(self, z):
+        """Mean (T, D) and per-DOF standard deviation (T, D) of positions at phases z (eq. 2)."""
+        psi = self.basis_(z)
+        N = self.basis_.n_basis
+        mean = np.stack([psi @ self.mean_[j * N:(j + 1) * N] for j in range(self.n_dofs_)], axis=1)
+        std = np.stack([np.sqrt(np.einsum('tn,nk,tk->t', psi,
+                                          self.cov_[j * N:(j + 1) * N, j * N:(j + 1) * N], psi))
+                        for j in range(self.n_dofs_)], axis=1)
+        return mean, std
+
+
+def _regularised_cov(S, n, prior_diag, strength):
+    """MAP covariance under the conjugate prior: (S + s Omega) / (n + s); symmetric by construction."""
+    cov = (S + strength * np.diag(prior_diag)) / (n + strength)
+    return 0.5 * (cov + cov.T)
+
+
+def _validate_trajectories(trajectories):
+    if len(trajectories) == 0:
+        raise ValueError('no trajectories given')
+    out = []
+    D = None
+    for i, item in enumerate(trajectories):
+        z, Y = item
+        z = np.asarray(z, dtype=float)
+        Y = np.asarray(Y, dtype=float)
+        if z.ndim != 1 or Y.ndim != 2 or Y.shape[0] != z.shape[0]:
+            raise ValueError(f'trajectory {i}: need shapes z (T,) and Y (T, D), got {z.shape} and {Y.shape}')
+        if not np.all(np.isfinite(z)) or np.any(np.isinf(Y)):
+            raise ValueError(f'trajectory {i}: NaN/Inf in phases or Inf in values')
+        if np.any(np.diff(z) <= 0):
+            raise ValueError(f'trajectory {i}: phases must be strictly increasing')
+        if D is None:
+            D = Y.shape[1]
+        elif Y.shape[1] != D:
+            raise ValueError(f'trajectory {i}: has {Y.shape[1]} DOFs, expected {D}')
+        if np.isnan(Y).all():
+            raise ValueError(f'trajectory {i}: has no observed sample')
+        out.append((z, Y))
+    return out

@@ -1,0 +1,140 @@
+"""Phase estimation (eqs. 15-20) and the recursive online estimator against the batch eq. 18."""
+
+import numpy as np
+import pytest
+
+from mixture_ip_ros.core.demonstration import Demonstration
+from mixture_ip_ros.core.interaction import condition_on_observed, trajectory_distribution
+from mixture_ip_ros.core.mixture import MixtureIProMP
+from mixture_ip_ros.core.online import OnlineEstimator
+from mixture_ip_ros.core.phase import (alpha_prior_from_durations, log_evidence_batch,
+                                       phase_posterior_batch)
+
+from synthetic import mixture_demos, random_spd, sample_trajectory
+
+
+@pytest.fixture(scope='module')
+def model_and_demos():
+    demos, labels, _, _ = mixture_demos(seed=1)
+    return MixtureIProMP(3, n_basis=8).fit(demos), demos, labels
+
+
+def test_recursive_log_evidence_equals_batch_eq18(model_and_demos):
+    model, demos, _ = model_and_demos
+    est = OnlineEstimator(model, n_alpha=12, min_interval=0.0)
+    demo = demos[4]
+    idx = np.arange(0, int(0.7 * len(demo.t)), 4)
+    for i in idx:
+        est.update(demo.t[i], demo.observed[i])
+    do = model.n_observed_ * model.n_basis
+    for k in range(3):
+        for m in range(0, 12, 3):
+            ref = log_evidence_batch(model.means_[k][:do], model.covariances_[k][:do, :do],
+                                     model.basis_, demo.t[idx], demo.observed[idx],
+                                     est.alphas[m], model.observed_noise_var_)
+            assert est.log_evidence[k, m] == pytest.approx(ref, rel=1e-8)
+    batch = phase_posterior_batch(model, demo.t[idx], demo.observed[idx], est.alphas)
+    assert np.allclose(est.joint_posterior(), np.exp(batch), atol=1e-10)
+
+
+def test_covariances_stay_symmetric_positive_definite_over_long_streams(model_and_demos):
+    model, demos, _ = model_and_demos
+    est = OnlineEstimator(model, n_alpha=6, min_interval=0.0)
+    demo = demos[0]
+    t = np.linspace(0, 3 * demo.duration, 3000)       # long past the end: z clamped to 1
+    y = demo.observed[-1]
+    for ti in t[1:]:
+        est.update(ti, y)
+    assert np.allclose(est.sigma, est.sigma.transpose(0, 2, 1), atol=0)
+    assert np.all(np.linalg.eigvalsh(est.sigma).min(axis=1) > 0)
+
+
+def test_prediction_equals_conditioning_the_map_hypothesis(model_and_demos):
+    model, demos, _ = model_and_demos
+    est = OnlineEstimator(model, n_alpha=12, min_interval=0.0)
+    demo = demos[20]
+    idx = np.arange(0, int(0.5 * len(demo.t)), 5)
+    for i in idx:
+        est.update(demo.t[i], demo.observed[i])
+    k, a = est.map_hypothesis()
+    z = np.linspace(0, 1, 11)
+    out = est.predict(z)
+    mean, cov = condition_on_observed(model.means_[k], model.covariances_[k], model.basis_,
+                                      model.n_observed_, a * demo.t[idx], demo.observed[idx],
+                                      model.observed_noise_var_)
+    ref = trajectory_distribution(mean, cov, model.basis_, z, a,
+                                  dofs=range(3, 3 + model.n_controlled_))
+    for key in ('position', 'velocity', 'acceleration', 'position_cov'):
+        assert np.allclose(out['controlled'][key], ref[key], atol=1e-8), key
+    assert np.allclose(out['time'], z / a)
+    assert out['component'] == k and out['alpha'] == a
+
+
+def test_online_selects_true_pattern_and_resets(model_and_demos):
+    model, demos, labels = model_and_demos
+    est = OnlineEstimator(model, n_alpha=20)
+    comp_label = [np.bincount(labels[model.resp_.argmax(1) == k], minlength=3).argmax()
+                  for k in range(3)]
+    for i in (0, 15, 30):
+        est.reset()
+        assert est.n_observations == 0
+        assert np.allclose(est.component_posterior(), model.weights_)
+        for t, y in zip(demos[i].t, demos[i].observed):
+            est.update(t, y)
+        assert comp_label[est.map_hypothesis()[0]] == labels[i]
+        assert est.component_posterior().max() > 0.99
+        assert est.phase() == pytest.approx(1.0, abs=0.15)
+
+
+def test_min_interval_skips_correlated_samples(model_and_demos):
+    model, demos, _ = model_and_demos
+    est = OnlineEstimator(model, n_alpha=5, min_interval=0.05)
+    used = [est.update(t, y) for t, y in zip(demos[0].t[:30], demos[0].observed[:30])]
+    assert sum(used) == 6 and est.n_observations == 6      # 100 Hz -> every 5th sample
+
+
+def test_online_rejects_bad_input(model_and_demos):
+    model, _, _ = model_and_demos
+    est = OnlineEstimator(model, n_alpha=5, min_interval=0.0)
+    with pytest.raises(ValueError, match='NaN'):
+        est.update(0.1, [np.nan, 0, 0])
+    with pytest.raises(ValueError, match='shape'):
+        est.update(0.1, [0, 0])
+    with pytest.raises(ValueError, match='before the onset'):
+        est.update(-0.1, [0, 0, 0])
+    est.update(0.2, [0, 0, 0])
+    with pytest.raises(ValueError, match='increase'):
+        est.update(0.1, [0, 0, 0])
+    assert est.n_observations == 1 and np.all(np.isfinite(est.log_evidence))
+
+
+def test_alpha_map_within_ten_percent_after_forty_percent_observed():
+    """Thesis 4.3.1: durations differing by 2x; 20 train / 40 test trajectories."""
+    rng = np.random.default_rng(11)
+    from mixture_ip_ros.core.basis import GaussianBasis
+    b = GaussianBasis(10)
+    P, Q, N = 2, 1, 10
+    zc = b.centers
+    mean = np.concatenate([np.sin(2.5 * zc), 0.6 * np.cos(3 * zc) - 0.3, zc ** 2])
+    cov = random_spd(rng, (P + Q) * N, 0.002, rank=4)
+
+    def demo():
+        w = rng.multivariate_normal(mean, cov)
+        t, Y = sample_trajectory(b, w, P + Q, rng.uniform(1.0, 2.0), noise=0.002, rng=rng)
+        return Demonstration(t, Y[:, :P], Y[:, P:])
+    train = [demo() for _ in range(20)]
+    model = MixtureIProMP(1, n_basis=10, observation_noise=0.005).fit(train)
+    hits = []
+    for _ in range(40):
+        d = demo()
+        est = OnlineEstimator(model, n_alpha=50)
+        n = int(0.4 * len(d.t))
+        for t, y in zip(d.t[:n], d.observed[:n]):
+            est.update(t, y)
+        hits.append(abs(est.map_hypothesis()[1] * d.duration - 1) < 0.1)
+    assert np.mean(hits) >= 0.9
+
+
+def test_alpha_prior_from_durations():
+    mean, std = alpha_prior_from_durations([1.0, 2.0])
+    assert mean == pytest.approx(0.75) and std == pytest.approx(0.25)
