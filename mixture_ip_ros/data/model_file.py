@@ -1,0 +1,126 @@
+"""Model files: a fitted MixtureIProMP as .npz (no pickle) plus a JSON metadata record.
+
+Loading validates everything a consumer relies on (format version, shapes, finite values,
+symmetric positive definite covariances, a probability vector of component weights) and
+refuses a mismatched or corrupt file with a ModelFileError naming the file and the problem.
+"""
+
+import json
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from mixture_ip_ros import __version__
+from mixture_ip_ros.core.basis import GaussianBasis
+from mixture_ip_ros.core.mixture import MixtureIProMP
+
+FORMAT = 'mixture_ip_ros/mixture-iprompt'
+FORMAT_VERSION = 1
+_PARAMS = ('n_components', 'n_basis', 'method', 'ridge', 'prior_strength', 'prior_scale',
+           'max_iter', 'tol', 'n_init', 'random_state', 'observation_noise',
+           'min_alpha_rel_std')
+_ARRAYS = ('weights', 'means', 'covariances', 'noise_var', 'alpha_mean', 'alpha_std',
+           'prior_cov_diag')
+
+
+class ModelFileError(ValueError):
+    pass
+
+
+def save_model(path, model: MixtureIProMP, *, observed_names, controlled_names,
+               observed_frame='iiwa_link_0', component_labels=None, extra=None):
+    """Write ``model`` to ``path`` (.npz). Names are the DOF names consumers check against."""
+    model._check_fitted()
+    if len(observed_names) != model.n_observed_ or len(controlled_names) != model.n_controlled_:
+        raise ValueError(f'need {model.n_observed_} observed and {model.n_controlled_} controlled '
+                         f'names, got {len(observed_names)} and {len(controlled_names)}')
+    meta = {
+        'format': FORMAT, 'format_version': FORMAT_VERSION, 'package_version': __version__,
+        'basis': model.basis_.to_dict(),
+        'n_observed': model.n_observed_, 'n_controlled': model.n_controlled_,
+        'observed_names': list(observed_names), 'controlled_names': list(controlled_names),
+        'observed_frame': observed_frame,
+        'params': {p: getattr(model, p) for p in _PARAMS},
+        'component_labels': list(component_labels) if component_labels is not None else None,
+        'log_likelihood': [float(v) for v in model.log_likelihood_],
+        'extra': extra or {},
+    }
+    arrays = {name: np.asarray(getattr(model, name + '_'), dtype=float) for name in _ARRAYS}
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, 'wb') as f:
+        np.savez(f, metadata=np.array(json.dumps(meta)), **arrays)
+    return path
+
+
+def load_model(path, *, observed_names=None, controlled_names=None):
+    """Read and validate a model file; returns (model, metadata).
+
+    If ``observed_names``/``controlled_names`` are given they must match the file's.
+    """
+    path = Path(path)
+
+    def fail(msg):
+        raise ModelFileError(f'model file {path}: {msg}')
+    if not path.is_file():
+        fail('does not exist')
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            data = {k: npz[k] for k in npz.files}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
+        fail(f'not a readable .npz ({e})')
+    if 'metadata' not in data:
+        fail('no metadata record')
+    try:
+        meta = json.loads(str(data['metadata']))
+    except json.JSONDecodeError as e:
+        fail(f'metadata is not JSON ({e})')
+    if meta.get('format') != FORMAT:
+        fail(f"not a mixture_ip_ros model (format {meta.get('format')!r})")
+    if meta.get('format_version') != FORMAT_VERSION:
+        fail(f"format version {meta.get('format_version')} is not supported "
+             f'(this package reads {FORMAT_VERSION})')
+    missing = [a for a in _ARRAYS if a not in data]
+    if missing:
+        fail(f'missing arrays {missing}')
+    for name in _ARRAYS:
+        if not np.all(np.isfinite(data[name])):
+            fail(f'{name} contains NaN or Inf')
+    try:
+        basis = GaussianBasis.from_dict(meta['basis'])
+        P, Q = int(meta['n_observed']), int(meta['n_controlled'])
+        params = meta['params']
+        K = int(params['n_components'])
+    except (KeyError, TypeError, ValueError) as e:
+        fail(f'incomplete metadata ({e})')
+    d = (P + Q) * basis.n_basis
+    expected = {'weights': (K,), 'means': (K, d), 'covariances': (K, d, d),
+                'noise_var': (P + Q,), 'alpha_mean': (K,), 'alpha_std': (K,),
+                'prior_cov_diag': (d,)}
+    for name, shape in expected.items():
+        if data[name].shape != shape:
+            fail(f'{name} has shape {data[name].shape}, expected {shape}')
+    w = data['weights']
+    if np.any(w <= 0) or abs(w.sum() - 1) > 1e-6:
+        fail('component weights are not a probability vector')
+    if np.any(data['alpha_mean'] <= 0) or np.any(data['alpha_std'] <= 0) or np.any(
+            data['noise_var'] <= 0):
+        fail('phase priors and noise variances must be positive')
+    for k, C in enumerate(data['covariances']):
+        if not np.allclose(C, C.T, rtol=0, atol=1e-10 * np.abs(C).max()):
+            fail(f'covariance {k} is not symmetric')
+        try:
+            np.linalg.cholesky(C)
+        except np.linalg.LinAlgError:
+            fail(f'covariance {k} is not positive definite')
+    for key, given in (('observed_names', observed_names), ('controlled_names', controlled_names)):
+        if given is not None and list(given) != meta.get(key):
+            fail(f'{key} {meta.get(key)} do not match the expected {list(given)}')
+    model = MixtureIProMP(**{p: params[p] for p in _PARAMS if p in params})
+    model.basis_ = basis
+    model.n_observed_, model.n_controlled_ = P, Q
+    for name in _ARRAYS:
+        setattr(model, name + '_', data[name])
+    model.log_likelihood_ = meta.get('log_likelihood', [])
+    return model, meta

@@ -1,0 +1,86 @@
+"""Model files: round trip without pickle, and refusal of corrupt or mismatched files."""
+
+import json
+import zipfile
+
+import numpy as np
+import pytest
+
+from mixture_ip_ros.core.mixture import MixtureIProMP
+from mixture_ip_ros.data.model_file import ModelFileError, load_model, save_model
+
+from synthetic import mixture_demos
+
+OBS = ['wrist_x', 'wrist_y', 'wrist_z']
+CTRL = [f'iiwa_joint_{i}' for i in range(1, 5)]
+
+
+@pytest.fixture(scope='module')
+def fitted():
+    demos = mixture_demos(seed=2)[0]
+    return MixtureIProMP(3, n_basis=8).fit(demos), demos
+
+
+def _arrays(path):
+    with np.load(path, allow_pickle=False) as z:
+        return {k: z[k] for k in z.files}
+
+
+def _rewrite(path, **changes):
+    data = _arrays(path)
+    data.update(changes)
+    with open(path, 'wb') as f:
+        np.savez(f, **data)
+
+
+def test_round_trip_predicts_identically(tmp_path, fitted):
+    model, demos = fitted
+    path = save_model(tmp_path / 'm.npz', model, observed_names=OBS, controlled_names=CTRL,
+                      component_labels=['a', 'b', 'c'])
+    loaded, meta = load_model(path, observed_names=OBS, controlled_names=CTRL)
+    assert meta['component_labels'] == ['a', 'b', 'c']
+    d = demos[3]
+    z = d.t / d.duration
+    a = model.predict_controlled(z[-1:], d.observed[-1:], z)
+    b = loaded.predict_controlled(z[-1:], d.observed[-1:], z)
+    assert np.array_equal(a['position'], b['position'])
+    assert all(v.dtype != object for v in _arrays(path).values())
+
+
+@pytest.mark.parametrize('change, message', [
+    (lambda p: p.write_bytes(b'not a zip'), 'not a readable'),
+    (lambda p: p.write_bytes(p.read_bytes()[:200]), 'not a readable'),
+    (lambda p: _rewrite(p, means=np.full((3, 56), np.nan)), 'NaN'),
+    (lambda p: _rewrite(p, weights=np.array([0.5, 0.6, -0.1])), 'probability'),
+    (lambda p: _rewrite(p, means=np.zeros((3, 10))), 'shape'),
+    (lambda p: _rewrite(p, covariances=-np.tile(np.eye(56), (3, 1, 1))), 'positive definite'),
+])
+def test_corrupt_files_are_refused(tmp_path, fitted, change, message):
+    path = save_model(tmp_path / 'm.npz', fitted[0], observed_names=OBS, controlled_names=CTRL)
+    change(path)
+    with pytest.raises(ModelFileError, match=message):
+        load_model(path)
+
+
+def test_version_and_name_mismatch_are_refused(tmp_path, fitted):
+    path = save_model(tmp_path / 'm.npz', fitted[0], observed_names=OBS, controlled_names=CTRL)
+    with pytest.raises(ModelFileError, match='controlled_names'):
+        load_model(path, controlled_names=[f'panda_joint{i}' for i in range(1, 5)])
+    meta = json.loads(str(_arrays(path)['metadata']))
+    meta['format_version'] = 99
+    _rewrite(path, metadata=np.array(json.dumps(meta)))
+    with pytest.raises(ModelFileError, match='version 99'):
+        load_model(path)
+    with pytest.raises(ModelFileError, match='does not exist'):
+        load_model(tmp_path / 'nope.npz')
+
+
+def test_a_pickled_array_is_refused(tmp_path, fitted):
+    path = save_model(tmp_path / 'm.npz', fitted[0], observed_names=OBS, controlled_names=CTRL)
+    data = _arrays(path)
+    data['weights'] = np.array([object()], dtype=object)
+    with open(path, 'wb') as f:
+        np.savez(f, **data)
+    assert zipfile.is_zipfile(path)
+    with pytest.raises(ModelFileError, match='not a readable'):
+        load_model(path)
