@@ -79,5 +79,5 @@ def trajectory_distribution(mean, cov, basis: GaussianBasis, z, alpha: float = 1
     }
     idx = np.concatenate([np.arange(j * N, (j + 1) * N) for j in dofs])
     C = cov[np.ix_(idx, idx)].reshape(len(dofs), N, len(dofs), N)
-    out['position_cov'] = np.einsum('tn,injk,tk->tij', psi, C, psi)
+    out['position_cov'] = np.einsum('tn,injk,tk->tij', psi, C, psi, optimize=True)
     return out

@@ -76,7 +76,7 @@ class OnlineEstimator:
         if self.t_last is not None:
             if t <= self.t_last:
                 raise ValueError(f'time must increase: {t} after {self.t_last}')
-            if t - self.t_last < self.min_interval:
+            if t - self.t_last < self.min_interval - 1e-9:   # stamps are ns: no float slack
                 return False
         psi = basis_rows(self.alphas * t, self.model.basis_.centers, self.model.basis_.width)
         kalman_update(self.sigma, self.mu, self.log_evidence_flat, psi, self._psi_index, y,

@@ -1,0 +1,421 @@
+"""rosbag2 demonstration bags, written and read with the pure-Python `rosbags` library.
+
+One bag is one demonstration: the human wrist as ``geometry_msgs/msg/PoseStamped`` (default
+``/mocap/wrist``, frame ``world``) and the robot as ``sensor_msgs/msg/JointState`` (default
+``/joint_states``, joints ``iiwa_joint_1`` .. ``iiwa_joint_7``). Bags are rosbag2 format version 9
+(what ``ros2 bag`` on Jazzy writes), mcap storage by default or sqlite3, with the Jazzy type store so
+message definitions and type hashes match the installed ROS 2 message packages.
+
+Times are header stamps (the sensor's acquisition time); a message whose stamp is zero falls back to
+the bag's receive (log) time. An occlusion is a stretch without wrist messages, exactly like a mocap
+driver that stops publishing while the marker is hidden.
+
+The pattern label (evaluation only, no learner may read it) is stored in the bag's metadata
+``custom_data`` under the key ``mixture_ip_ros.label``, not on a topic: a player replaying the bag then
+cannot leak it to the estimator, and ``ros2 bag`` keeps it when it rewrites metadata.
+
+Every problem with a bag (not a bag, missing topic, empty topic, wrong message type, unreadable or
+truncated storage, undecodable message, joints missing from the JointState) raises :class:`BagError`
+(a ``ValueError``) that names the bag and the problem.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Mapping, Optional, Sequence
+
+import numpy as np
+import yaml
+
+WRIST_TOPIC = '/mocap/wrist'
+JOINT_TOPIC = '/joint_states'
+WRIST_TYPE = 'geometry_msgs/msg/PoseStamped'
+JOINT_TYPE = 'sensor_msgs/msg/JointState'
+JOINT_NAMES = tuple(f'iiwa_joint_{i}' for i in range(1, 8))
+LABEL_KEY = 'mixture_ip_ros.label'
+STORAGES = ('mcap', 'sqlite3')
+BAG_VERSION = 9
+# Deterministic default start (2023-11-14T22:13:20Z) so a seeded scenario gives byte-identical bags.
+DEFAULT_START_TIME_NS = 1_700_000_000 * 10**9
+
+
+class BagError(ValueError):
+    """A bag that cannot be used, with the bag path and what is wrong with it."""
+
+    def __init__(self, bag, problem: str):
+        self.bag = str(bag)
+        self.problem = problem
+        super().__init__(f'bag {self.bag}: {problem}')
+
+
+@dataclass
+class RawRecording:
+    """The two streams of one bag as recorded (no resampling, no frame change).
+
+    Times are seconds since ``start_time_ns`` (the earliest stamp of either stream), so
+    ``start_time_ns + round(t * 1e9)`` is the original stamp. Wrist quaternions are (x, y, z, w).
+    """
+
+    wrist_t: np.ndarray
+    wrist_xyz: np.ndarray
+    wrist_quat: np.ndarray
+    wrist_frame: str
+    joint_t: np.ndarray
+    joint_q: np.ndarray
+    joint_names: tuple
+    label: Optional[str]
+    start_time_ns: int = 0
+    joint_qd: Optional[np.ndarray] = None
+    custom_data: Optional[dict] = None
+
+
+@dataclass(frozen=True)
+class BagMessage:
+    """One serialized (CDR) message as stored in a bag."""
+
+    topic: str
+    msgtype: str
+    log_time_ns: int
+    data: bytes
+
+
+def typestore():
+    """The ROS 2 Jazzy type store (cached): message definitions and RIHS01 hashes of Jazzy."""
+    global _TYPESTORE
+    if _TYPESTORE is None:
+        from rosbags.typesys import Stores, get_typestore
+        _TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+    return _TYPESTORE
+
+
+_TYPESTORE = None
+
+
+def sensor_data_qos():
+    """rosbags QoS equal to rclpy's qos_profile_sensor_data (best effort, keep last 5, volatile)."""
+    from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness,
+                                    QosReliability, QosTime)
+    return Qos(QosHistory.KEEP_LAST, 5, QosReliability.BEST_EFFORT, QosDurability.VOLATILE,
+               QosTime(0, 0), QosTime(0, 0), QosLiveliness.SYSTEM_DEFAULT, QosTime(0, 0), False)
+
+
+def reliable_qos(depth: int = 10):
+    """rosbags QoS of a default rclpy publisher (reliable, keep last, volatile)."""
+    from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness,
+                                    QosReliability, QosTime)
+    return Qos(QosHistory.KEEP_LAST, depth, QosReliability.RELIABLE, QosDurability.VOLATILE,
+               QosTime(0, 0), QosTime(0, 0), QosLiveliness.SYSTEM_DEFAULT, QosTime(0, 0), False)
+
+
+# ----------------------------------------------------------------------------------------- writing
+
+def _stamp_ns(start_time_ns: int, t: np.ndarray) -> np.ndarray:
+    return start_time_ns + np.round(np.asarray(t, dtype=float) * 1e9).astype(np.int64)
+
+
+def _check_times(name: str, t: np.ndarray) -> np.ndarray:
+    t = np.asarray(t, dtype=float)
+    if t.ndim != 1:
+        raise ValueError(f'{name} must be 1-D, got shape {t.shape}')
+    if not np.all(np.isfinite(t)):
+        raise ValueError(f'{name} contains NaN or Inf')
+    if t.size and np.any(np.diff(t) <= 0):
+        raise ValueError(f'{name} must be strictly increasing')
+    if t.size and t[0] < 0:
+        raise ValueError(f'{name} must be >= 0 (seconds since start_time_ns), got {t[0]}')
+    return t
+
+
+def write_demonstration_bag(path, wrist_t, wrist_xyz, joint_t, joint_q, *,
+                            storage: str = 'mcap',
+                            label: Optional[str] = None,
+                            wrist_topic: str = WRIST_TOPIC,
+                            joint_topic: str = JOINT_TOPIC,
+                            frame_id: str = 'world',
+                            joint_names: Sequence[str] = JOINT_NAMES,
+                            wrist_quat=None,
+                            joint_qd=None,
+                            start_time_ns: int = DEFAULT_START_TIME_NS,
+                            custom_data: Optional[Mapping[str, str]] = None) -> Path:
+    """Write one demonstration as a rosbag2 (version 9) directory at ``path`` and return it.
+
+    ``wrist_t`` (N,) and ``joint_t`` (M,) are seconds since ``start_time_ns``; ``wrist_xyz`` (N, 3)
+    metres in ``frame_id``; wrist rows that are NaN are not written (occlusion = no message).
+    ``joint_q`` (M, J) radians, optional ``joint_qd`` (M, J) rad/s. ``path`` must not exist.
+    """
+    from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
+
+    path = Path(path)
+    if storage not in STORAGES:
+        raise ValueError(f'storage must be one of {STORAGES}, got {storage!r}')
+    if path.exists():
+        raise FileExistsError(f'{path} exists already; not overwriting a bag')
+    wrist_t = _check_times('wrist_t', wrist_t)
+    joint_t = _check_times('joint_t', joint_t)
+    wrist_xyz = np.asarray(wrist_xyz, dtype=float)
+    if wrist_xyz.shape != (wrist_t.size, 3):
+        raise ValueError(f'wrist_xyz must have shape ({wrist_t.size}, 3), got {wrist_xyz.shape}')
+    if wrist_quat is None:
+        wrist_quat = np.tile([0.0, 0.0, 0.0, 1.0], (wrist_t.size, 1))
+    wrist_quat = np.asarray(wrist_quat, dtype=float)
+    if wrist_quat.shape != (wrist_t.size, 4):
+        raise ValueError(f'wrist_quat must have shape ({wrist_t.size}, 4) as (x, y, z, w), '
+                         f'got {wrist_quat.shape}')
+    joint_names = tuple(str(n) for n in joint_names)
+    joint_q = np.asarray(joint_q, dtype=float)
+    if joint_q.shape != (joint_t.size, len(joint_names)):
+        raise ValueError(f'joint_q must have shape ({joint_t.size}, {len(joint_names)}), '
+                         f'got {joint_q.shape}')
+    if not np.all(np.isfinite(joint_q)):
+        raise ValueError('joint_q contains NaN or Inf')
+    if joint_qd is not None:
+        joint_qd = np.asarray(joint_qd, dtype=float)
+        if joint_qd.shape != joint_q.shape or not np.all(np.isfinite(joint_qd)):
+            raise ValueError(f'joint_qd must be finite with the shape of joint_q {joint_q.shape}')
+    present = ~np.isnan(wrist_xyz).any(axis=1)
+    if np.any(np.isinf(wrist_xyz)):
+        raise ValueError('wrist_xyz contains Inf (use NaN rows for occlusion)')
+    if not present.any():
+        raise ValueError('wrist_xyz has no observed sample')
+    if joint_t.size == 0:
+        raise ValueError('joint_t is empty')
+    if wrist_topic == joint_topic:
+        raise ValueError(f'wrist and joint topics must differ, both are {wrist_topic!r}')
+
+    ts = typestore()
+    Time = ts.types['builtin_interfaces/msg/Time']
+    Header = ts.types['std_msgs/msg/Header']
+    PoseStamped = ts.types[WRIST_TYPE]
+    Pose = ts.types['geometry_msgs/msg/Pose']
+    Point = ts.types['geometry_msgs/msg/Point']
+    Quaternion = ts.types['geometry_msgs/msg/Quaternion']
+    JointState = ts.types[JOINT_TYPE]
+    empty = np.zeros(0, dtype=np.float64)
+
+    records = []  # (stamp_ns, order, topic, cdr)
+    for k, ns in zip(np.flatnonzero(present), _stamp_ns(start_time_ns, wrist_t[present])):
+        ns = int(ns)
+        p, q = wrist_xyz[k], wrist_quat[k]
+        msg = PoseStamped(
+            header=Header(stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id=frame_id),
+            pose=Pose(position=Point(x=float(p[0]), y=float(p[1]), z=float(p[2])),
+                      orientation=Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]),
+                                             w=float(q[3]))))
+        records.append((ns, 0, 'wrist', ts.serialize_cdr(msg, WRIST_TYPE)))
+    for k, ns in enumerate(_stamp_ns(start_time_ns, joint_t)):
+        ns = int(ns)
+        msg = JointState(
+            header=Header(stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id=''),
+            name=list(joint_names), position=joint_q[k].copy(),
+            velocity=joint_qd[k].copy() if joint_qd is not None else empty, effort=empty)
+        records.append((ns, 1, 'joint', ts.serialize_cdr(msg, JOINT_TYPE)))
+    records.sort(key=lambda r: (r[0], r[1]))  # a recorder writes in arrival order
+
+    plugin = StoragePlugin.MCAP if storage == 'mcap' else StoragePlugin.SQLITE3
+    writer = Writer(path, version=BAG_VERSION, storage_plugin=plugin)
+    try:
+        for key, value in (custom_data or {}).items():
+            writer.set_custom_data(str(key), str(value))
+        if label is not None:
+            writer.set_custom_data(LABEL_KEY, str(label))
+        writer.open()
+        conns = {
+            'wrist': writer.add_connection(wrist_topic, WRIST_TYPE, typestore=ts,
+                                           offered_qos_profiles=[sensor_data_qos()]),
+            'joint': writer.add_connection(joint_topic, JOINT_TYPE, typestore=ts,
+                                           offered_qos_profiles=[reliable_qos()]),
+        }
+        for ns, _, which, data in records:
+            writer.write(conns[which], ns, data)
+        writer.close()
+    except WriterError as exc:
+        raise ValueError(f'cannot write bag {path}: {exc}') from exc
+    return path
+
+
+# ----------------------------------------------------------------------------------------- reading
+
+def _open_reader(path: Path):
+    from rosbags.rosbag2 import Reader
+    if not path.exists():
+        raise BagError(path, 'does not exist')
+    if path.is_dir() and not (path / 'metadata.yaml').is_file():
+        if any(path.glob('*.mcap')) or any(path.glob('*.db3')):
+            raise BagError(path, 'metadata.yaml is missing (recording not closed cleanly? '
+                                 '`ros2 bag reindex` can rebuild it)')
+        raise BagError(path, 'not a rosbag2 bag directory (no metadata.yaml)')
+    try:
+        reader = Reader(path)
+        reader.open()
+    except BagError:
+        raise
+    except Exception as exc:  # rosbags raises many types on damaged files
+        raise BagError(path, f'cannot open bag: {type(exc).__name__}: {exc}') from exc
+    return reader
+
+
+def bag_custom_data(path) -> dict:
+    """The ``custom_data`` map of a bag directory's metadata.yaml ({} if none)."""
+    path = Path(path)
+    meta = path / 'metadata.yaml'
+    if not meta.is_file():
+        return {}
+    try:
+        info = yaml.safe_load(meta.read_text())['rosbag2_bagfile_information']
+    except Exception as exc:
+        raise BagError(path, f'unreadable metadata.yaml: {exc}') from exc
+    custom = info.get('custom_data') or {}
+    if not isinstance(custom, dict):
+        raise BagError(path, f'custom_data in metadata.yaml is not a map: {custom!r}')
+    return {str(k): str(v) for k, v in custom.items()}
+
+
+def bag_topics(path) -> dict:
+    """{topic: (msgtype, message count)} of a bag."""
+    path = Path(path)
+    reader = _open_reader(path)
+    try:
+        return {c.topic: (c.msgtype, c.msgcount) for c in reader.connections}
+    finally:
+        reader.close()
+
+
+def read_messages(path, topics: Optional[Sequence[str]] = None) -> list:
+    """All messages of a bag (optionally only ``topics``) as :class:`BagMessage`, in log-time order."""
+    path = Path(path)
+    reader = _open_reader(path)
+    try:
+        conns = reader.connections
+        if topics is not None:
+            missing = sorted(set(topics) - {c.topic for c in conns})
+            if missing:
+                raise BagError(path, f'topics {missing} not in bag (has {_topic_list(conns)})')
+            conns = [c for c in conns if c.topic in set(topics)]
+        out = [BagMessage(c.topic, c.msgtype, int(ns), bytes(data))
+               for c, ns, data in reader.messages(connections=conns)]
+    except BagError:
+        raise
+    except Exception as exc:
+        raise BagError(path, f'cannot read messages (truncated or corrupt storage?): '
+                             f'{type(exc).__name__}: {exc}') from exc
+    finally:
+        reader.close()
+    out.sort(key=lambda m: m.log_time_ns)
+    return out
+
+
+def _topic_list(conns) -> str:
+    return ', '.join(sorted(f'{c.topic} [{c.msgtype}]' for c in conns)) or 'no topics'
+
+
+def _find_connection(path, conns, topic, msgtype):
+    matching = [c for c in conns if c.topic == topic]
+    if not matching:
+        raise BagError(path, f'topic {topic!r} not in bag (has {_topic_list(conns)})')
+    wrong = [c.msgtype for c in matching if c.msgtype != msgtype]
+    if wrong:
+        raise BagError(path, f'topic {topic!r} has message type {wrong[0]}, expected {msgtype}')
+    return matching
+
+
+def _stamp_or_log(stamp, log_ns: int) -> int:
+    ns = int(stamp.sec) * 10**9 + int(stamp.nanosec)
+    return ns if ns > 0 else log_ns
+
+
+def read_bag(path, *, wrist_topic: str = WRIST_TOPIC, joint_topic: str = JOINT_TOPIC,
+             joint_names: Sequence[str] = JOINT_NAMES) -> RawRecording:
+    """Read one demonstration bag (directory, or a bare .mcap/.db3 file) into a :class:`RawRecording`.
+
+    Joints are picked by name from each JointState, in the order of ``joint_names`` (extra joints,
+    e.g. a gripper, are ignored). Raises :class:`BagError` for any unusable bag.
+    """
+    path = Path(path)
+    joint_names = tuple(joint_names)
+    custom = bag_custom_data(path) if path.is_dir() else {}
+    ts = typestore()
+    reader = _open_reader(path)
+    try:
+        conns = reader.connections
+        wrist_conns = _find_connection(path, conns, wrist_topic, WRIST_TYPE)
+        joint_conns = _find_connection(path, conns, joint_topic, JOINT_TYPE)
+        wrist_ids = {c.id for c in wrist_conns}
+        w_ns, w_xyz, w_quat, frames = [], [], [], set()
+        j_ns, j_q, j_qd = [], [], []
+        index = None
+        last_names = None
+        for conn, log_ns, data in reader.messages(connections=wrist_conns + joint_conns):
+            try:
+                msg = ts.deserialize_cdr(data, conn.msgtype)
+            except Exception as exc:
+                raise BagError(path, f'cannot decode a {conn.msgtype} message on {conn.topic} at '
+                                     f'log time {log_ns} ns: {type(exc).__name__}: {exc}') from exc
+            if conn.id in wrist_ids:
+                p, q = msg.pose.position, msg.pose.orientation
+                w_ns.append(_stamp_or_log(msg.header.stamp, log_ns))
+                w_xyz.append((p.x, p.y, p.z))
+                w_quat.append((q.x, q.y, q.z, q.w))
+                frames.add(msg.header.frame_id)
+            else:
+                names = list(msg.name)
+                if names != last_names:
+                    missing = [n for n in joint_names if n not in names]
+                    if missing:
+                        raise BagError(path, f'JointState on {joint_topic!r} lacks joints {missing} '
+                                             f'(has {names})')
+                    index = [names.index(n) for n in joint_names]
+                    last_names = names
+                pos = np.asarray(msg.position, dtype=float)
+                if pos.size != len(names):
+                    raise BagError(path, f'JointState on {joint_topic!r} at log time {log_ns} ns has '
+                                         f'{pos.size} positions for {len(names)} names')
+                vel = np.asarray(msg.velocity, dtype=float)
+                j_ns.append(_stamp_or_log(msg.header.stamp, log_ns))
+                j_q.append(pos[index])
+                j_qd.append(vel[index] if vel.size == len(names) else None)
+    except BagError:
+        raise
+    except Exception as exc:
+        raise BagError(path, f'cannot read messages (truncated or corrupt storage?): '
+                             f'{type(exc).__name__}: {exc}') from exc
+    finally:
+        reader.close()
+
+    if not w_ns:
+        raise BagError(path, f'topic {wrist_topic!r} has no messages')
+    if not j_ns:
+        raise BagError(path, f'topic {joint_topic!r} has no messages')
+    if len(frames) > 1:
+        raise BagError(path, f'wrist messages on {wrist_topic!r} use several frames {sorted(frames)}')
+
+    w_ns = np.asarray(w_ns, dtype=np.int64)
+    j_ns = np.asarray(j_ns, dtype=np.int64)
+    w_xyz = np.asarray(w_xyz, dtype=float)
+    w_quat = np.asarray(w_quat, dtype=float)
+    j_q = np.asarray(j_q, dtype=float)
+    if not np.all(np.isfinite(j_q)):
+        raise BagError(path, f'joint positions on {joint_topic!r} contain NaN or Inf')
+    qd = None
+    if all(v is not None for v in j_qd):
+        qd = np.asarray(j_qd, dtype=float)
+    # Sort by stamp (stamps can arrive out of order) and drop repeated stamps.
+    w_order = _unique_sorted(w_ns)
+    j_order = _unique_sorted(j_ns)
+    w_ns, w_xyz, w_quat = w_ns[w_order], w_xyz[w_order], w_quat[w_order]
+    j_ns, j_q = j_ns[j_order], j_q[j_order]
+    if qd is not None:
+        qd = qd[j_order]
+    start = int(min(w_ns[0], j_ns[0]))
+    return RawRecording(
+        wrist_t=(w_ns - start) / 1e9, wrist_xyz=w_xyz, wrist_quat=w_quat,
+        wrist_frame=frames.pop(), joint_t=(j_ns - start) / 1e9, joint_q=j_q,
+        joint_names=joint_names, label=custom.get(LABEL_KEY), start_time_ns=start,
+        joint_qd=qd, custom_data=custom)
+
+
+def _unique_sorted(ns: np.ndarray) -> np.ndarray:
+    order = np.argsort(ns, kind='stable')
+    keep = np.ones(order.size, dtype=bool)
+    keep[1:] = np.diff(ns[order]) > 0
+    return order[keep]

@@ -1,0 +1,148 @@
+"""`mixture-ip demo`: the closed loop end to end.
+
+Generate the box-assembly demonstrations as bags (if the folder is missing), hold out some
+interactions per pattern, train on the rest (K by leave-one-out), then replay the held-out
+human demonstrations through the real nodes (bag_player -> observer -> estimator -> sim) on
+simulated time, and report per interaction the true and chosen pattern, when the robot
+committed, how far its hand ended from the target, and the estimator's latency.
+"""
+
+import json
+import logging
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from mixture_ip_ros.data.bags import read_bag
+from mixture_ip_ros.data.dataset import load_demonstration
+from mixture_ip_ros.data.scenarios import read_labels, write_scenario_bags
+from mixture_ip_ros.robot.kinematics import IiwaKinematics
+from mixture_ip_ros.training import text_progress, train_to_file
+
+log = logging.getLogger('mixture_ip_ros.demo')
+
+
+def split_held_out(labels: dict, per_pattern: int, seed: int = 0):
+    """(training bag names, held-out bag names): ``per_pattern`` held out of every pattern."""
+    rng = np.random.default_rng(seed)
+    held = []
+    for pattern in sorted(set(labels.values())):
+        names = sorted(n for n, lbl in labels.items() if lbl == pattern)
+        held += list(rng.choice(names, size=min(per_pattern, len(names) - 1), replace=False))
+    return sorted(n for n in labels if n not in held), sorted(held)
+
+
+def demonstrated_target(bag, kinematics):
+    """Where the robot's hand ended in the demonstration (FK of its last recorded posture) and
+    where the human's wrist ended."""
+    rec = read_bag(bag)
+    wrist = rec.wrist_xyz[~np.isnan(rec.wrist_xyz).any(axis=1)][-1]
+    return kinematics.fk(rec.joint_q[-1])[0], wrist
+
+
+def prepare(data_dir: Path, out_dir: Path, held_out: int, seed: int, n_components=None):
+    """Bags (generated if missing), the held-out split and a trained model file."""
+    if not data_dir.is_dir() or not any(data_dir.iterdir()):
+        log.info('generating the box-assembly demonstrations in %s', data_dir)
+        write_scenario_bags('box_assembly', data_dir, seed=seed)
+    labels = read_labels(data_dir)
+    train_names, held_names = split_held_out(labels, held_out, seed)
+    demos = [load_demonstration(data_dir / n) for n in train_names]
+    model_path = out_dir / 'model.npz'
+    kwargs = {'n_components': n_components} if n_components else {
+        'progress': text_progress()}
+    t0 = time.monotonic()
+    model, info = train_to_file(demos, model_path, **kwargs)
+    info['train_seconds'] = time.monotonic() - t0
+    return labels, held_names, model_path, info
+
+
+def run_demo(args):
+    os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+    from mixture_ip_ros.system import ClosedLoop   # rclpy only once the data is ready
+
+    data_dir, out_dir = Path(args.data), Path(args.out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    labels, held, model_path, info = prepare(data_dir, out_dir, args.held_out, args.seed)
+    print(f"trained on {info['n_demonstrations']} demonstrations: K = {info['n_components']}"
+          + (f" (leave-one-out RMS by K: {np.round(info['loo_rms_mean'], 4).tolist()})"
+             if 'loo_rms_mean' in info else ''))
+    kin = IiwaKinematics()
+    loop = ClosedLoop(model_path, domain_id=int(os.environ.get('ROS_DOMAIN_ID', 42)))
+    records = []
+    try:
+        for name in held:
+            loop.go_home()
+            target, wrist_end = demonstrated_target(data_dir / name, kin)
+            rec = loop.run_interaction(data_dir / name, true_pattern=labels[name], target=target)
+            rec.extra['wrist_end'] = wrist_end
+            records.append(rec)
+            print(_line(rec), flush=True)
+        latency = {'update_us_mean': loop.estimator.latency.mean_us,
+                   'update_us_max': loop.estimator.latency.max_us,
+                   'plan_us_mean': loop.estimator.plan_latency.mean_us,
+                   'plan_us_max': loop.estimator.plan_latency.max_us}
+    finally:
+        loop.close()
+    report = make_report(records, info, latency)
+    print(json.dumps({k: v for k, v in report.items() if k != 'interactions'}, indent=1))
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(report, indent=1) + '\n')
+    from mixture_ip_ros.plots import plot_demo
+    plot_demo(records, out_dir)
+    print(f'plots in {out_dir}')
+    if args.render:
+        render_all(records, Path(args.render))
+    return report
+
+
+def hand_error_cm(rec):
+    return float(100 * np.linalg.norm(rec.flange[-1] - rec.target)) if len(rec.flange) else None
+
+
+def _line(rec):
+    he = hand_error_cm(rec)
+    wrist = rec.extra.get('wrist_end')
+    to_wrist = (100 * np.linalg.norm(rec.flange[-1] - wrist)) if wrist is not None else np.nan
+    commit = '-' if rec.commit_fraction is None else f'{rec.commit_fraction:.2f}'
+    return (f'{rec.name:>16s}: true {rec.true_pattern:<12s} chosen {str(rec.chosen_pattern):<12s}'
+            f' committed at {commit} of the motion; hand {he:5.1f} cm from target, '
+            f'{to_wrist:5.1f} cm from the wrist')
+
+
+def make_report(records, info, latency):
+    rows = []
+    for r in records:
+        rows.append({'name': r.name, 'true_pattern': r.true_pattern,
+                     'chosen_pattern': r.chosen_pattern, 'commit_fraction': r.commit_fraction,
+                     'hand_error_cm': hand_error_cm(r),
+                     'hand_to_wrist_cm': float(100 * np.linalg.norm(
+                         r.flange[-1] - r.extra['wrist_end'])) if 'wrist_end' in r.extra else None,
+                     'non_finite_commands': r.extra.get('non_finite_commands', 0)})
+    correct = [r['true_pattern'] == r['chosen_pattern'] for r in rows]
+    return {'interactions': rows,
+            'selection_accuracy': float(np.mean(correct)) if rows else None,
+            'hand_error_cm_mean': float(np.mean([r['hand_error_cm'] for r in rows])) if rows else None,
+            'commit_fraction_mean': float(np.mean([r['commit_fraction'] for r in rows
+                                                   if r['commit_fraction'] is not None] or [np.nan])),
+            'n_components': info['n_components'], 'training': info, 'latency': latency}
+
+
+def render_all(records, render_dir: Path):
+    try:
+        from mixture_ip_ros.render import render_interaction, rendering_available
+    except ImportError as e:
+        print(f'rendering unavailable ({e}); no video', file=sys.stderr)
+        return
+    ok, why = rendering_available()
+    if not ok:
+        print(f'rendering unavailable ({why}); no video', file=sys.stderr)
+        return
+    render_dir.mkdir(parents=True, exist_ok=True)
+    for rec in records:
+        paths = render_interaction(rec, render_dir)
+        print(f'rendered {rec.name}: ' + ', '.join(str(p) for p in paths.values()))

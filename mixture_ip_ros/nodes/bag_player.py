@@ -1,0 +1,317 @@
+"""bag_player: replay a rosbag2 bag like `ros2 bag play` (which is not available from PyPI).
+
+Publishes every message of the bag with its original timing (scaled by ``rate``), optionally looping,
+remapping topics (``remap: ['/from:=/to']``), publishing /clock with the bag time and rewriting
+header stamps to the current time. The wrist (``sensor_data_topics``) goes out with sensor-data
+QoS like a mocap driver; every other topic is reliable.
+
+Messages are stored as CDR, which is what DDS carries, so they are published as serialized bytes
+(after a check at load that each one deserializes into the installed rclpy message class); only
+with ``rewrite_stamps`` are they deserialized to set ``header.stamp`` to the time the message is
+scheduled for on the node's clock (the current time, without the player's scheduling jitter).
+
+Pacing: playback runs in its own thread that sleeps on the monotonic clock until each message is
+due (no busy wait). With ``use_sim_time`` the player follows the node's simulated clock instead
+(checked every 2 ms): it starts at the first /clock it receives and publishes each message when
+the simulated time reaches its recorded offset / rate, so playback stays in step with a
+simulator running slower or faster than real time, and stops while the simulation does.
+"""
+
+from collections import deque
+import importlib
+import threading
+import time
+
+import rclpy
+import rclpy.logging
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.serialization import deserialize_message
+from rosgraph_msgs.msg import Clock
+from builtin_interfaces.msg import Time
+
+from mixture_ip_ros.data.bags import BagError, read_messages
+
+
+def message_class(msgtype: str):
+    """The rclpy class of 'pkg/msg/Type'; ValueError if that package is not installed."""
+    parts = msgtype.split('/')
+    if len(parts) != 3:
+        raise ValueError(f'message type {msgtype!r} is not of the form pkg/msg/Type')
+    try:
+        return getattr(importlib.import_module(f'{parts[0]}.{parts[1]}'), parts[2])
+    except (ImportError, AttributeError) as exc:
+        raise ValueError(f'message type {msgtype!r} is not available in this ROS 2 installation') from exc
+
+
+def parse_remaps(entries) -> dict:
+    """['/from:=/to', ...] -> {'/from': '/to'}; empty entries are ignored."""
+    out = {}
+    for entry in entries:
+        if not entry:
+            continue
+        src, sep, dst = entry.partition(':=')
+        if not sep or not src.strip() or not dst.strip():
+            raise ValueError(f"remap entry {entry!r} is not of the form '/from:=/to'")
+        out[src.strip()] = dst.strip()
+    return out
+
+
+SIM_POLL = 0.002  # s between looks at a simulated clock
+
+
+def _to_time(ns: int) -> Time:
+    return Time(sec=ns // 10**9, nanosec=ns % 10**9)
+
+
+class BagPlayer(Node):
+    """Publishes a bag's messages with their original timing; see the module docstring."""
+
+    def __init__(self, **kwargs):
+        super().__init__('bag_player', **kwargs)
+        self.declare_parameter('bag', '')
+        self.declare_parameter('rate', 1.0)
+        self.declare_parameter('loop', False)
+        self.declare_parameter('remap', Parameter.Type.STRING_ARRAY)
+        self.declare_parameter('topics', Parameter.Type.STRING_ARRAY)
+        self.declare_parameter('sensor_data_topics', ['/mocap/wrist'])
+        self.declare_parameter('publish_clock', False)
+        self.declare_parameter('rewrite_stamps', False)
+        self.declare_parameter('start_paused', False)
+        self.declare_parameter('start_delay', 0.0)
+        self.declare_parameter('queue_depth', 10)
+
+        bag = self.get_parameter('bag').value
+        self._rate = float(self.get_parameter('rate').value)
+        self._loop = bool(self.get_parameter('loop').value)
+        remaps = parse_remaps(self._string_list('remap'))
+        topics = self._string_list('topics')
+        sensor_topics = set(self._string_list('sensor_data_topics'))
+        self._publish_clock = bool(self.get_parameter('publish_clock').value)
+        self._rewrite = bool(self.get_parameter('rewrite_stamps').value)
+        self._start_delay = float(self.get_parameter('start_delay').value)
+        depth = int(self.get_parameter('queue_depth').value)
+        if not bag:
+            raise ValueError("parameter 'bag' (path of the rosbag2 directory) is required")
+        if not self._rate > 0:
+            raise ValueError(f"parameter 'rate' must be > 0, got {self._rate}")
+        if self._start_delay < 0:
+            raise ValueError(f"parameter 'start_delay' must be >= 0, got {self._start_delay}")
+        if depth < 1:
+            raise ValueError(f"parameter 'queue_depth' must be >= 1, got {depth}")
+
+        messages = read_messages(bag, topics=topics or None)
+        types = {}
+        for m in messages:
+            types.setdefault(m.topic, m.msgtype)
+        classes = {topic: message_class(msgtype) for topic, msgtype in types.items()}
+        # A message that does not deserialize would break every subscriber: drop it here, counted.
+        self.dropped = 0
+        self._messages = []
+        for m in messages:
+            try:
+                deserialize_message(m.data, classes[m.topic])
+            except Exception as exc:  # the C deserializer raises several types on bad CDR
+                self.dropped += 1
+                self.get_logger().warning(f'dropping undecodable {m.msgtype} on {m.topic} at '
+                                          f'{m.log_time_ns} ns: {exc}')
+                continue
+            self._messages.append(m)
+        if not self._messages:
+            raise BagError(bag, 'no playable messages')
+        self._has_header = {topic: hasattr(cls(), 'header') for topic, cls in classes.items()}
+        self._classes = classes
+        self._topic_pubs = {}
+        for topic, cls in classes.items():
+            qos = qos_profile_sensor_data if topic in sensor_topics else QoSProfile(
+                depth=depth, reliability=ReliabilityPolicy.RELIABLE)
+            self._topic_pubs[topic] = self.create_publisher(cls, remaps.get(topic, topic), qos)
+        self._clock_pub = None
+        if self._publish_clock:
+            # Like rclcpp::ClockQoS: best effort, keep last 1 (rclpy's TimeSource subscribes so).
+            self._clock_pub = self.create_publisher(
+                Clock, '/clock', QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT))
+
+        self.published = 0
+        self.published_per_topic = {topic: 0 for topic in classes}
+        self.loops_completed = 0
+        self.max_lateness = 0.0  # seconds a message went out after it was due
+        self._lateness_sum = 0.0
+        self.recent_lateness = deque(maxlen=10000)  # per message, seconds (negative = early)
+        self.first_sent = self.last_sent = None     # monotonic times of first / last publish
+        self._sim_time = bool(self.get_parameter('use_sim_time').value)
+        self._cond = threading.Condition()
+        self._paused = bool(self.get_parameter('start_paused').value)
+        self._stop = False
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._play, name='bag_player', daemon=True)
+        t0 = self._messages[0].log_time_ns
+        span = (self._messages[-1].log_time_ns - t0) / 1e9
+        self.get_logger().info(
+            f'playing {bag}: {len(self._messages)} messages on {sorted(classes)} over {span:.2f} s '
+            f'at rate {self._rate}' + (' (looping)' if self._loop else '')
+            + (f', remapped {remaps}' if remaps else '')
+            + (' [paused]' if self._paused else ''))
+        self._thread.start()
+
+    def _string_list(self, name):
+        return list(self.get_parameter_or(name, Parameter(name, value=[])).value or [])
+
+    # ------------------------------------------------------------------ control (thread-safe)
+    def pause(self):
+        with self._cond:
+            self._paused = True
+            self._cond.notify_all()
+
+    def resume(self):
+        with self._cond:
+            self._paused = False
+            self._cond.notify_all()
+
+    @property
+    def paused(self) -> bool:
+        return self._paused
+
+    @property
+    def finished(self) -> bool:
+        """True once every message was published (never while looping, unless stopped)."""
+        return self._done.is_set()
+
+    def wait_until_finished(self, timeout=None) -> bool:
+        return self._done.wait(timeout)
+
+    @property
+    def mean_lateness(self) -> float:
+        return self._lateness_sum / self.published if self.published else 0.0
+
+    def matched_subscriptions(self) -> dict:
+        """{bag topic: number of matched subscriptions}."""
+        return {topic: pub.get_subscription_count() for topic, pub in self._topic_pubs.items()}
+
+    def destroy_node(self):
+        with self._cond:
+            self._stop = True
+            self._cond.notify_all()
+        if self._thread.is_alive() and self._thread is not threading.current_thread():
+            self._thread.join(timeout=2.0)
+        return super().destroy_node()
+
+    # ------------------------------------------------------------------ playback thread
+    def _now(self) -> float:
+        """Seconds on the pacing clock: the node's (simulated) ROS clock under use_sim_time,
+        else the monotonic clock."""
+        if self._sim_time:
+            return self.get_clock().now().nanoseconds / 1e9
+        return time.monotonic()
+
+    def _wait_until(self, due: float, shift: list) -> bool:
+        """Sleep until pacing-clock time ``due + shift[0]``; time spent paused extends shift[0].
+
+        Returns False if asked to stop. Simulated time cannot be slept on directly (it may run
+        faster or slower than real time, or stop), so it is checked every SIM_POLL seconds.
+        """
+        with self._cond:
+            while True:
+                if self._stop:
+                    return False
+                if self._paused:
+                    began = self._now()
+                    while self._paused and not self._stop:
+                        self._cond.wait()
+                    shift[0] += self._now() - began
+                    continue
+                remaining = due + shift[0] - self._now()
+                if remaining <= 0:
+                    return True
+                self._cond.wait(min(remaining, SIM_POLL) if self._sim_time else remaining)
+
+    def _wait_to_start(self) -> bool:
+        """Wait while paused and, under use_sim_time, until /clock has been received (the clock
+        reads 0 before). Returns False if asked to stop."""
+        with self._cond:
+            while self._paused or (self._sim_time and self.get_clock().now().nanoseconds == 0):
+                if self._stop:
+                    return False
+                self._cond.wait(SIM_POLL if self._sim_time else None)
+        return not self._stop
+
+    def _stamp_offset_ns(self) -> int:
+        """Pacing-clock seconds -> node-clock nanoseconds, for stamps at the scheduled time."""
+        if self._sim_time:
+            return 0
+        return self.get_clock().now().nanoseconds - int(round(time.monotonic() * 1e9))
+
+    def _play(self):
+        try:
+            if not self._wait_to_start():
+                return
+            t0 = self._messages[0].log_time_ns
+            shift = [0.0]
+            start = self._now() + self._start_delay
+            stamp_offset = self._stamp_offset_ns()
+            while True:
+                for m in self._messages:
+                    due = start + (m.log_time_ns - t0) / 1e9 / self._rate
+                    if not self._wait_until(due, shift):
+                        return
+                    sent = self._now()
+                    self._publish(m, stamp_offset + int(round((due + shift[0]) * 1e9)))
+                    if self.first_sent is None:
+                        self.first_sent = sent
+                    self.last_sent = sent
+                    late = sent - (due + shift[0])
+                    self.recent_lateness.append(late)
+                    self._lateness_sum += late
+                    self.max_lateness = max(self.max_lateness, late)
+                self.loops_completed += 1
+                if not self._loop:
+                    self.get_logger().info(f'playback finished: {self.published} messages')
+                    return
+                # Next loop starts one mean message period after the last message.
+                period = (self._messages[-1].log_time_ns - t0) / 1e9 / max(len(self._messages) - 1, 1)
+                start = due + shift[0] + period / self._rate
+                shift = [0.0]
+        except Exception as exc:  # e.g. the context was shut down under us
+            if not self._stop:
+                self.get_logger().error(f'playback stopped: {type(exc).__name__}: {exc}')
+        finally:
+            self._done.set()
+
+    def _publish(self, m, stamp_ns: int):
+        if self._clock_pub is not None:
+            self._clock_pub.publish(Clock(clock=_to_time(m.log_time_ns)))
+        pub = self._topic_pubs[m.topic]
+        if self._rewrite and self._has_header[m.topic]:
+            msg = deserialize_message(m.data, self._classes[m.topic])
+            msg.header.stamp = _to_time(stamp_ns)
+            pub.publish(msg)
+        else:
+            pub.publish(m.data)
+        self.published += 1
+        self.published_per_topic[m.topic] += 1
+
+
+def main(args=None):
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = BagPlayer()
+        # Exit when the bag has been played (like `ros2 bag play`); spinning serves parameters.
+        while rclpy.ok() and not node.finished:
+            rclpy.spin_once(node, timeout_sec=0.1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ValueError as exc:  # bad parameters or a bad bag (BagError)
+        rclpy.logging.get_logger('bag_player').error(str(exc))
+        return 1
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

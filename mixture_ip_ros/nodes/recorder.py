@@ -1,0 +1,90 @@
+"""recorder: listens to the closed loop and keeps what a report, plot or video needs.
+
+Not an executable: the demo and the integration tests spin it beside the real nodes. It also
+watches every JointTrajectory command and counts the non-finite ones (there must be none).
+"""
+
+import math
+import threading
+
+import numpy as np
+from geometry_msgs.msg import PointStamped, PoseStamped
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, Header
+from trajectory_msgs.msg import JointTrajectory
+
+
+def _sec(stamp) -> float:
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+class InteractionRecorder(Node):
+
+    def __init__(self, **kwargs):
+        super().__init__('recorder', **kwargs)
+        self.declare_parameter('joint_state_topic', '/joint_states')
+        self.declare_parameter('flange_topic', '/iiwa/flange_pose')
+        self.declare_parameter('observation_topic', '/observer/wrist')
+        self.declare_parameter('event_topic', '/observer/event')
+        self.declare_parameter('posterior_topic', '/estimator/posterior')
+        self.declare_parameter('trajectory_topic', '/iiwa/joint_trajectory')
+        qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+        p = self.get_parameter
+        self._lock = threading.Lock()
+        self.clear()
+        self.create_subscription(JointState, p('joint_state_topic').value, self._on_joints, qos)
+        self.create_subscription(PoseStamped, p('flange_topic').value, self._on_flange, qos)
+        self.create_subscription(PointStamped, p('observation_topic').value, self._on_wrist, qos)
+        self.create_subscription(Header, p('event_topic').value, self._on_event, qos)
+        self.create_subscription(Float64MultiArray, p('posterior_topic').value,
+                                 self._on_posterior, qos)
+        self.create_subscription(JointTrajectory, p('trajectory_topic').value,
+                                 self._on_trajectory, qos)
+
+    def clear(self):
+        with self._lock:
+            self.joints, self.flange, self.wrist = [], [], []
+            self.events, self.posterior, self.trajectories = [], [], []
+            self.non_finite_commands = 0
+
+    def snapshot(self):
+        """Copies of everything recorded so far."""
+        with self._lock:
+            return {k: list(getattr(self, k)) for k in
+                    ('joints', 'flange', 'wrist', 'events', 'posterior', 'trajectories')}
+
+    def latest_time(self) -> float:
+        with self._lock:
+            return self.joints[-1][0] if self.joints else 0.0
+
+    def _on_joints(self, msg):
+        with self._lock:
+            self.joints.append((_sec(msg.header.stamp), np.array(msg.position)))
+
+    def _on_flange(self, msg):
+        p = msg.pose.position
+        with self._lock:
+            self.flange.append((_sec(msg.header.stamp), np.array([p.x, p.y, p.z])))
+
+    def _on_wrist(self, msg):
+        p = msg.point
+        with self._lock:
+            self.wrist.append((_sec(msg.header.stamp), np.array([p.x, p.y, p.z])))
+
+    def _on_event(self, msg):
+        with self._lock:
+            self.events.append((_sec(msg.stamp), msg.frame_id))
+
+    def _on_posterior(self, msg):
+        with self._lock:
+            self.posterior.append((self.get_clock().now().nanoseconds * 1e-9, np.array(msg.data)))
+
+    def _on_trajectory(self, msg):
+        values = [v for pt in msg.points for v in (*pt.positions, *pt.velocities,
+                                                    *pt.accelerations)]
+        with self._lock:
+            if not all(math.isfinite(v) for v in values):
+                self.non_finite_commands += 1
+            self.trajectories.append((self.get_clock().now().nanoseconds * 1e-9, msg))

@@ -1,0 +1,433 @@
+"""What the estimator node decides, without ROS: one interaction at a time, the online estimate
+of (component, phase speed), when to commit the robot, and the plan it is sent.
+
+Time is seconds since the interaction's onset on the observations' clock (their stamps), so a
+plan's ``times`` are exactly the ``time_from_start`` of a JointTrajectory stamped with the onset.
+
+Plan (:func:`build_plan`): under the MAP hypothesis (k*, alpha*), ``n_points`` phases evenly
+spaced from ``z_start = alpha* (t_now + lookahead)`` to 1, ``times = z / alpha*``, positions,
+velocities and accelerations of the conditioned robot trajectory (eq. 13); the first point lies
+``lookahead`` ahead of the latest observation so the controller gets a reachable target, and the
+last point's velocity and acceleration are zero (the human holds still past z = 1, and
+joint_trajectory_controller rejects a trajectory ending in motion). When ``z_start`` >= 1 (the
+human is at rest) the plan is a single point: the predicted final posture, reached
+``max(lookahead, settle_time)`` after ``t_now``; later final plans of the same interaction keep
+that time (while it is still ahead) so that the arrival does not recede with every replan.
+
+Commit (:func:`should_commit`): the first plan is sent once p(k* | D) >= ``confidence_threshold``
+with at least ``min_observations`` observations used; afterwards every replan is sent, also
+when k* changes (the controller blends from its current state into the new plan).
+"""
+
+from collections import deque
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+STATES = ('idle', 'observing', 'committed', 'done')
+# Why an observation was not used (beyond 'skipped': within min_interval of the last one used).
+REJECT_REASONS = ('wrong_frame', 'non_finite', 'outside_interaction', 'before_onset',
+                  'time_backwards', 'exception', 'bad_joint_state')
+PHASE_EPS = 1e-6
+
+
+def summary_labels(n_components: int) -> list:
+    """Field names of :func:`posterior_summary` (the posterior topic's layout)."""
+    return [f'p{k}' for k in range(n_components)] + ['alpha', 'phase', 'confidence',
+                                                     'component']
+
+
+def posterior_summary(estimator, t_now: float) -> np.ndarray:
+    """[p(k=0 | D) .. p(k=K-1 | D), alpha*, phase, confidence = p(k* | D), k*]."""
+    p = estimator.component_posterior()
+    k, alpha = estimator.map_hypothesis()
+    phase = float(np.clip(alpha * t_now, 0.0, 1.0))
+    return np.concatenate([p, [alpha, phase, p[k], k]]).astype(float)
+
+
+def should_commit(component_posterior, n_observations: int, confidence_threshold: float,
+                  min_observations: int) -> bool:
+    """Whether the robot may start: enough evidence and a confident most probable component."""
+    return (n_observations >= min_observations
+            and float(np.max(component_posterior)) >= confidence_threshold)
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Robot plan and predicted wrist movement under one hypothesis (component, alpha).
+
+    times (n,) s since onset (time_from_start); phases (n,); positions, velocities,
+    accelerations (n, Q) in joint order of the model. wrist_times, wrist_phases (m,) and
+    wrist_positions (m, P): the whole predicted human movement, phases 0..1.
+    final: the human is at rest (single point at the final posture).
+    """
+
+    times: np.ndarray
+    phases: np.ndarray
+    positions: np.ndarray
+    velocities: np.ndarray
+    accelerations: np.ndarray
+    wrist_times: np.ndarray
+    wrist_phases: np.ndarray
+    wrist_positions: np.ndarray
+    component: int
+    alpha: float
+    final: bool
+
+
+def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float = 0.1,
+               settle_time: float = 0.5, n_wrist_points: Optional[int] = None,
+               component: Optional[int] = None, alpha: Optional[float] = None,
+               final_time: Optional[float] = None, robot_q=None,
+               catch_up_velocity=None) -> Plan:
+    """The plan from ``t_now`` (s since onset) on, for (component, alpha) (default: the MAP).
+
+    ``final_time``: when the human is at rest, the time of the final point if it is at least
+    ``lookahead`` ahead of ``t_now`` (else ``t_now + max(lookahead, settle_time)``).
+    ``robot_q``/``catch_up_velocity``: the robot's current joints and the joint speeds it may
+    use to catch up with the plan. Points it cannot reach in time at those speeds are dropped
+    (the controller blends from its state into the first kept point); if none is reachable the
+    plan is the last point, timed when it can be reached. Without them, no catch-up limit.
+    """
+    if n_points < 2:
+        raise ValueError(f'n_points must be >= 2, got {n_points}')
+    if not np.isfinite(t_now) or t_now < 0:
+        raise ValueError(f't_now must be finite and >= 0, got {t_now}')
+    k_map, a_map = estimator.map_hypothesis()
+    k = k_map if component is None else int(component)
+    a = a_map if alpha is None else float(alpha)
+    z_start = a * (t_now + lookahead)
+    final = z_start >= 1.0 - PHASE_EPS
+    if final:
+        phases = np.array([1.0])
+        if final_time is None or not final_time >= t_now + lookahead:
+            final_time = t_now + max(lookahead, settle_time)
+        times = np.array([float(final_time)])
+    else:
+        phases = np.linspace(z_start, 1.0, n_points)
+        times = phases / a
+    m = n_points if n_wrist_points is None else int(n_wrist_points)
+    wrist_phases = np.linspace(0.0, 1.0, m)
+    pred = estimator.predict(np.concatenate([phases, wrist_phases]), component=k, alpha=a)
+    a = pred['alpha']   # the grid value actually used (identical when a came from the grid)
+    n = len(phases)
+    ctrl = pred['controlled']
+    vel = ctrl['velocity'][:n].copy()
+    acc = ctrl['acceleration'][:n].copy()
+    vel[-1] = 0.0
+    acc[-1] = 0.0
+    pos = ctrl['position'][:n].copy()
+    if robot_q is not None and catch_up_velocity is not None:
+        reachable_at = t_now + np.max(np.abs(pos - np.asarray(robot_q))
+                                      / np.asarray(catch_up_velocity), axis=1)
+        ok = np.flatnonzero(times >= reachable_at)
+        first = ok[0] if ok.size else n - 1
+        times = times.copy()
+        times[first] = max(times[first], reachable_at[first])
+        phases, times, pos, vel, acc = (a[first:] for a in (phases, times, pos, vel, acc))
+    return Plan(times=times, phases=phases, positions=pos,
+                velocities=vel, accelerations=acc,
+                wrist_times=wrist_phases / a, wrist_phases=wrist_phases,
+                wrist_positions=pred['observed']['position'][n:].copy(),
+                component=int(pred['component']), alpha=float(a), final=bool(final))
+
+
+def check_plan(plan: Plan) -> Optional[str]:
+    """Why the plan must not be published (None if it may): non-finite values, times not
+    strictly increasing at nanosecond resolution, motion at the last point."""
+    for name in ('times', 'positions', 'velocities', 'accelerations', 'wrist_times',
+                 'wrist_positions'):
+        if not np.all(np.isfinite(getattr(plan, name))):
+            return f'non-finite {name}'
+    ns = np.round(plan.times * 1e9)
+    if ns[0] < 0 or np.any(np.diff(ns) <= 0):
+        return 'times not strictly increasing (or negative)'
+    if np.any(plan.velocities[-1] != 0) or np.any(plan.accelerations[-1] != 0):
+        return 'last point not at rest'
+    return None
+
+
+@dataclass
+class Step:
+    """What one replan produced: always the posterior summary and the plan (for the path);
+    ``send`` says whether the joint trajectory goes out. ``problem`` is check_plan's reason."""
+
+    summary: np.ndarray
+    plan: Optional[Plan]
+    send: bool
+    committed_now: bool = False
+    switched_from: Optional[int] = None
+    problem: Optional[str] = None
+
+
+class LatencyStats:
+    """Last / mean / max of a duration, in microseconds."""
+
+    def __init__(self):
+        self.count = 0
+        self.last_us = 0.0
+        self.max_us = 0.0
+        self._sum_us = 0.0
+
+    def add(self, seconds: float) -> None:
+        us = seconds * 1e6
+        self.count += 1
+        self.last_us = us
+        self._sum_us += us
+        self.max_us = max(self.max_us, us)
+
+    @property
+    def mean_us(self) -> float:
+        return self._sum_us / self.count if self.count else 0.0
+
+
+class InteractionPlanner:
+    """The estimator node's logic: idle -> observing -> committed -> done per interaction.
+
+    ``onset(stamp_ns)`` resets the estimator; ``observe(stamp_ns, xyz)`` feeds it and returns
+    'used', 'skipped' or the reject reason; ``step()`` (timer) and ``end(stamp_ns)`` (last
+    plan) return a :class:`Step`. Observations that arrive outside an interaction are held
+    (at most ``pending_limit``) and replayed if a later onset covers them: events and
+    observations come on different topics, so an onset may be delivered after the first
+    observations it precedes.
+
+    ``interactions`` lists one record (dict) per interaction, the last one is the current one
+    (the most recent ``max_records`` are kept). Absolute times (``*_time``) are seconds on the
+    stamps' clock, ``*_elapsed`` seconds since the onset:
+    onset_stamp_ns, onset_time; state; component, label, confidence, alpha, phase (at the
+    latest replan); final_component, final_label (set when the interaction closes);
+    commit_phase (phase at the first plan sent = fraction of the human movement seen; None if
+    the robot never moved), commit_time, commit_elapsed, commit_component,
+    commit_observations; n_observations (used), n_received, n_skipped, n_rejected; plans
+    (sent); switches (list of {elapsed, phase, from, to}); gaps; end_reason ('end',
+    'new_onset', None while running); end_time, end_elapsed (None for 'new_onset').
+    """
+
+    def __init__(self, estimator, *, confidence_threshold: float = 0.9,
+                 min_observations: int = 3, n_points: int = 25, lookahead: float = 0.1,
+                 settle_time: float = 0.5, labels=None, pending_limit: int = 1000,
+                 max_records: int = 1000, catch_up_velocity=None):
+        if not 0.0 < confidence_threshold <= 1.0:
+            raise ValueError(f'confidence_threshold must be in (0, 1], got {confidence_threshold}')
+        if int(min_observations) != min_observations or min_observations < 1:
+            raise ValueError(f'min_observations must be an integer >= 1, got {min_observations}')
+        if int(n_points) != n_points or n_points < 2:
+            raise ValueError(f'n_points must be an integer >= 2, got {n_points}')
+        if not (np.isfinite(lookahead) and lookahead >= 0):
+            raise ValueError(f'lookahead must be >= 0, got {lookahead}')
+        if not (np.isfinite(settle_time) and settle_time > 0):
+            raise ValueError(f'settle_time must be > 0, got {settle_time}')
+        if labels is not None and len(labels) != estimator.n_components:
+            raise ValueError(f'{len(labels)} component labels for {estimator.n_components} '
+                             'components')
+        self.estimator = estimator
+        self.confidence_threshold = float(confidence_threshold)
+        self.min_observations = int(min_observations)
+        self.n_points = int(n_points)
+        self.lookahead = float(lookahead)
+        self.settle_time = float(settle_time)
+        self.labels = None if labels is None else list(labels)
+        self.catch_up_velocity = (None if catch_up_velocity is None
+                                  else np.asarray(catch_up_velocity, dtype=float))
+        self.robot_q = None       # latest robot joints (set by the node), for catching up
+        self.state = 'idle'
+        self.interactions = []
+        self.received = 0
+        self.used = 0
+        self.skipped = 0
+        self.rejected = {reason: 0 for reason in REJECT_REASONS}
+        self.plans_sent = 0
+        self.plan_failures = 0
+        self._pending = deque()
+        self._pending_limit = int(pending_limit)
+        self._max_records = max(1, int(max_records))
+        self._onset_ns = None
+        self._t_latest = None     # latest observation time (s since onset), used or skipped
+        self._dirty = False       # something new since the last step
+        self._sent_component = None
+        self._final_time = None   # time of the last final (at rest) plan's point
+
+    # -- queries ----------------------------------------------------------------------
+    @property
+    def current(self) -> Optional[dict]:
+        return self.interactions[-1] if self.interactions else None
+
+    @property
+    def onset_ns(self) -> Optional[int]:
+        return self._onset_ns
+
+    @property
+    def t_now(self) -> float:
+        """Latest observation time of the interaction, s since onset (0 before any)."""
+        return 0.0 if self._t_latest is None else self._t_latest
+
+    @property
+    def active(self) -> bool:
+        return self.state in ('observing', 'committed')
+
+    @property
+    def n_pending(self) -> int:
+        return len(self._pending)
+
+    def label(self, k: Optional[int]):
+        return None if (k is None or self.labels is None) else self.labels[k]
+
+    def _absolute(self, elapsed: float) -> float:
+        return (self._onset_ns + round(elapsed * 1e9)) * 1e-9
+
+    # -- input ------------------------------------------------------------------------
+    def reject(self, reason: str) -> str:
+        self.rejected[reason] += 1
+        return reason
+
+    def refuse(self, reason: str) -> str:
+        """Count an observation received and rejected before ``observe`` (e.g. wrong frame)."""
+        self.received += 1
+        if self.active:
+            self.current['n_received'] += 1
+        return self._rejected_in_interaction(reason)
+
+    def onset(self, stamp_ns: int) -> list:
+        """Start an interaction at ``stamp_ns``; returns the reject reasons of held
+        observations that turned out to precede it (one entry each)."""
+        if self.active:
+            self._close('new_onset', None)
+        self.estimator.reset()
+        self._onset_ns = int(stamp_ns)
+        self._t_latest = None
+        self._dirty = True
+        self._sent_component = None
+        self._final_time = None
+        self.state = 'observing'
+        excess = len(self.interactions) + 1 - self._max_records
+        if excess > 0:
+            del self.interactions[:excess]
+        self.interactions.append({
+            'onset_stamp_ns': self._onset_ns, 'onset_time': self._onset_ns * 1e-9,
+            'state': 'observing',
+            'component': None, 'label': None, 'confidence': None, 'alpha': None,
+            'phase': 0.0, 'final_component': None, 'final_label': None,
+            'commit_phase': None, 'commit_time': None, 'commit_elapsed': None,
+            'commit_component': None, 'commit_observations': None,
+            'n_observations': 0, 'n_received': 0, 'n_skipped': 0, 'n_rejected': 0,
+            'plans': 0, 'switches': [], 'gaps': 0, 'end_reason': None, 'end_time': None,
+            'end_elapsed': None})
+        held, self._pending = self._pending, deque()
+        dropped = []
+        for ns, xyz in held:
+            if ns >= self._onset_ns:
+                self.received -= 1          # counted on arrival already
+                self.observe(ns, xyz)
+            else:
+                dropped.append(self.reject('outside_interaction'))
+        return dropped
+
+    def gap(self) -> None:
+        if self.active:
+            self.current['gaps'] += 1
+
+    def observe(self, stamp_ns: int, xyz) -> str:
+        """Feed one observation; 'used', 'skipped', 'held' (no interaction yet) or a reason."""
+        self.received += 1
+        if self.active:
+            self.current['n_received'] += 1
+        y = np.asarray(xyz, dtype=float)
+        if y.shape != (self.estimator.n_observed,) or not np.all(np.isfinite(y)):
+            return self._rejected_in_interaction('non_finite')
+        if not self.active:
+            self._pending.append((int(stamp_ns), y))
+            if len(self._pending) > self._pending_limit:
+                self._pending.popleft()
+                return self.reject('outside_interaction')
+            return 'held'
+        rec = self.current
+        t = (int(stamp_ns) - self._onset_ns) * 1e-9
+        if t < 0:
+            return self._rejected_in_interaction('before_onset')
+        if self._t_latest is not None and t <= self._t_latest:
+            return self._rejected_in_interaction('time_backwards')
+        try:
+            used = self.estimator.update(t, y)
+        except ValueError:
+            return self._rejected_in_interaction('exception')
+        self._t_latest = t
+        self._dirty = True
+        if used:
+            self.used += 1
+            rec['n_observations'] += 1
+            return 'used'
+        self.skipped += 1
+        rec['n_skipped'] += 1
+        return 'skipped'
+
+    def _rejected_in_interaction(self, reason):
+        if self.active:
+            self.current['n_rejected'] += 1
+        return self.reject(reason)
+
+    # -- planning ---------------------------------------------------------------------
+    def step(self, final: bool = False) -> Optional[Step]:
+        """Replan (timer): None when there is no interaction or nothing new since the last."""
+        if not self.active or not (self._dirty or final):
+            return None
+        self._dirty = False
+        est = self.estimator
+        rec = self.current
+        t_now = self.t_now
+        summary = posterior_summary(est, t_now)
+        K = est.n_components
+        k, alpha, phase, confidence = int(summary[-1]), summary[K], summary[K + 1], summary[K + 2]
+        rec.update(component=k, label=self.label(k), confidence=float(confidence),
+                   alpha=float(alpha), phase=float(phase))
+        plan = build_plan(est, t_now, n_points=self.n_points, lookahead=self.lookahead,
+                          settle_time=self.settle_time, component=k, alpha=alpha,
+                          final_time=self._final_time, robot_q=self.robot_q,
+                          catch_up_velocity=self.catch_up_velocity)
+        problem = check_plan(plan)
+        if problem is not None:
+            self.plan_failures += 1
+            return Step(summary, plan, send=False, problem=problem)
+        committed_now = False
+        if self.state == 'observing':
+            if not should_commit(summary[:K], est.n_observations, self.confidence_threshold,
+                                 self.min_observations):
+                return Step(summary, plan, send=False)
+            committed_now = True
+            self.state = rec['state'] = 'committed'
+            rec.update(commit_phase=float(phase), commit_elapsed=t_now,
+                       commit_time=self._absolute(t_now), commit_component=k,
+                       commit_observations=est.n_observations)
+        switched_from = None
+        if self._sent_component is not None and k != self._sent_component:
+            switched_from = self._sent_component
+            rec['switches'].append({'elapsed': t_now, 'phase': float(phase),
+                                    'from': switched_from, 'to': k})
+        self._sent_component = k
+        if plan.final:
+            self._final_time = float(plan.times[-1])
+        self.plans_sent += 1
+        rec['plans'] += 1
+        return Step(summary, plan, send=True, committed_now=committed_now,
+                    switched_from=switched_from)
+
+    def end(self, stamp_ns: int) -> Optional[Step]:
+        """The human stopped: the last plan (sent only if committed), then 'done'."""
+        if not self.active:
+            return None
+        t_end = (int(stamp_ns) - self._onset_ns) * 1e-9
+        if np.isfinite(t_end) and t_end > self.t_now:
+            self._t_latest = t_end
+        step = self.step(final=True)
+        self._close('end', t_end)
+        return step
+
+    def _close(self, reason: str, t_end: Optional[float]) -> None:
+        rec = self.current
+        rec['end_reason'] = reason
+        rec['end_elapsed'] = t_end
+        rec['end_time'] = None if t_end is None else self._absolute(t_end)
+        rec['final_component'] = rec['component']
+        rec['final_label'] = rec['label']
+        rec['state'] = 'done'
+        self.state = 'done'

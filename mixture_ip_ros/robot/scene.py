@@ -1,0 +1,154 @@
+"""MuJoCo scene built from models/iiwa14.urdf: torque actuators, table, stands, optional pole.
+
+The world frame is the robot base frame iiwa_link_0; the robot stands on the table top (z = 0).
+The human stands across the table, at +x. Everything here is in metres, base frame.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from mixture_ip_ros.paths import model_path
+from mixture_ip_ros.robot.kinematics import FLANGE_FRAME, JOINT_NAMES, URDF_NAME
+
+TIMESTEP = 0.001
+TABLE_TOP_Z = 0.0
+TABLE_X = (-0.35, 1.25)
+TABLE_Y = (-0.8, 0.8)
+TABLE_THICKNESS = 0.04
+FLOOR_Z = -0.75
+
+# Box-assembly scenario (thesis 3.4.2): stands beside the robot, clear of the handover region.
+STAND_HALF_SIZE = 0.06
+STAND_HEIGHT = 0.15
+PLATE_STAND_XY = (0.2, 0.55)
+SCREW_STAND_XY = (0.2, -0.55)
+PLATE_RADIUS = 0.09
+PLATE_THICKNESS = 0.01
+
+# Pole-pointing scenario (thesis 3.4.1): a vertical pole in front of the robot.
+POLE_XY = (0.5, 0.0)
+POLE_RADIUS = 0.03
+POLE_HEIGHT = 0.8
+
+HUMAN_WRIST = 'human_wrist'
+HUMAN_WRIST_DEFAULT = (1.0, 0.0, 0.3)
+FLANGE_SITE = FLANGE_FRAME
+ACTUATOR_NAMES = [f'{name}_torque' for name in JOINT_NAMES]
+
+# Contact filtering: robot geoms touch the environment but not each other (self-collision of the
+# simplified geometry would be spurious); environment geoms are static and never touch each other.
+ROBOT_CONTYPE, ROBOT_CONAFFINITY = 2, 1
+ENV_CONTYPE, ENV_CONAFFINITY = 1, 2
+
+_GREY = (0.55, 0.55, 0.58, 1.0)
+_ORANGE = (1.0, 0.42, 0.04, 1.0)
+_WOOD = (0.62, 0.48, 0.33, 1.0)
+
+
+def plate_position(stand_xy=PLATE_STAND_XY) -> np.ndarray:
+    """Centre of the plate lying on its stand."""
+    return np.array([stand_xy[0], stand_xy[1], TABLE_TOP_Z + STAND_HEIGHT + PLATE_THICKNESS / 2])
+
+
+def screw_position(stand_xy=SCREW_STAND_XY) -> np.ndarray:
+    """Head of the screw standing in its stand."""
+    return np.array([stand_xy[0], stand_xy[1], TABLE_TOP_Z + STAND_HEIGHT + 0.05])
+
+
+def _static_geom(body, name, gtype, size, pos, rgba, collide=True, quat=None):
+    geom = body.add_geom(name=name, type=gtype, size=list(size), pos=list(pos), rgba=list(rgba))
+    if quat is not None:
+        geom.quat = list(quat)
+    geom.contype = ENV_CONTYPE if collide else 0
+    geom.conaffinity = ENV_CONAFFINITY if collide else 0
+    return geom
+
+
+def build_spec(pole: bool = False, stands: bool = True, table: bool = True,
+               pole_xy=POLE_XY, pole_radius: float = POLE_RADIUS, pole_height: float = POLE_HEIGHT,
+               plate_stand_xy=PLATE_STAND_XY, screw_stand_xy=SCREW_STAND_XY,
+               timestep: float = TIMESTEP, urdf_path: str | Path | None = None) -> mujoco.MjSpec:
+    """The scene as an MjSpec, for callers that want to add things before compiling."""
+    path = Path(urdf_path) if urdf_path is not None else model_path(URDF_NAME)
+    if not path.is_file():
+        raise ValueError(f'URDF not found: {path}')
+    if not (timestep > 0 and np.isfinite(timestep)):
+        raise ValueError(f'timestep must be positive, got {timestep}')
+    if pole and not (pole_radius > 0 and pole_height > 0):
+        raise ValueError('pole_radius and pole_height must be positive')
+    spec = mujoco.MjSpec.from_file(str(path))
+    # Keep tool0 (massless, fixed) as its own body so the flange site has a home.
+    spec.compiler.fusestatic = False
+    spec.modelname = 'iiwa14_scene'
+    spec.option.timestep = timestep
+    # No joint damping or armature anywhere: the controller's Pinocchio model mirrors this exactly.
+    for joint in spec.joints:
+        joint.damping = [0.0, 0.0, 0.0]
+        joint.armature = 0.0
+        joint.frictionloss = 0.0
+
+    for geom in spec.geoms:
+        geom.contype = ROBOT_CONTYPE
+        geom.conaffinity = ROBOT_CONAFFINITY
+        link = geom.parent.name
+        orange = link in ('iiwa_link_2', 'iiwa_link_4', 'iiwa_link_6')
+        geom.rgba = list(_ORANGE if orange else _GREY)
+
+    flange = spec.body(FLANGE_FRAME)
+    flange.add_site(name=FLANGE_SITE, size=[0.01, 0, 0], rgba=[0.1, 0.1, 0.9, 1])
+
+    limits = {j.name: j.actfrcrange[1] for j in spec.joints}
+    for name, actuator_name in zip(JOINT_NAMES, ACTUATOR_NAMES):
+        effort = float(limits[name])
+        act = spec.add_actuator(name=actuator_name, target=name)
+        act.trntype = mujoco.mjtTrn.mjTRN_JOINT
+        act.set_to_motor()
+        act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        act.ctrlrange = [-effort, effort]
+
+    world = spec.worldbody
+    world.add_light(name='sun', pos=[0.5, -0.5, 2.5], dir=[0, 0.3, -1], castshadow=False)
+    world.add_camera(name='overview', pos=[2.1, -1.5, 1.3], xyaxes=[0.6, 0.8, 0, -0.35, 0.26, 0.9])
+    world.add_camera(name='side', pos=[0.5, -2.2, 0.5], xyaxes=[1, 0, 0, 0, 0.2, 1])
+    _static_geom(world, 'floor', mujoco.mjtGeom.mjGEOM_PLANE, (3, 3, 0.1), (0, 0, FLOOR_Z),
+                 (0.85, 0.85, 0.85, 1), collide=False)
+    if table:
+        half = ((TABLE_X[1] - TABLE_X[0]) / 2, (TABLE_Y[1] - TABLE_Y[0]) / 2, TABLE_THICKNESS / 2)
+        centre = ((TABLE_X[0] + TABLE_X[1]) / 2, (TABLE_Y[0] + TABLE_Y[1]) / 2,
+                  TABLE_TOP_Z - TABLE_THICKNESS / 2)
+        _static_geom(world, 'table_top', mujoco.mjtGeom.mjGEOM_BOX, half, centre, _WOOD)
+        leg_half = (TABLE_TOP_Z - TABLE_THICKNESS - FLOOR_Z) / 2
+        for i, (x, y) in enumerate([(TABLE_X[0] + 0.05, TABLE_Y[0] + 0.05),
+                                    (TABLE_X[0] + 0.05, TABLE_Y[1] - 0.05),
+                                    (TABLE_X[1] - 0.05, TABLE_Y[0] + 0.05),
+                                    (TABLE_X[1] - 0.05, TABLE_Y[1] - 0.05)]):
+            _static_geom(world, f'table_leg_{i}', mujoco.mjtGeom.mjGEOM_BOX,
+                         (0.03, 0.03, leg_half), (x, y, FLOOR_Z + leg_half), _WOOD, collide=False)
+    if stands:
+        for name, xy in (('plate', plate_stand_xy), ('screw', screw_stand_xy)):
+            half = (STAND_HALF_SIZE, STAND_HALF_SIZE, STAND_HEIGHT / 2)
+            _static_geom(world, f'{name}_stand', mujoco.mjtGeom.mjGEOM_BOX, half,
+                         (xy[0], xy[1], TABLE_TOP_Z + STAND_HEIGHT / 2), (0.3, 0.3, 0.35, 1))
+        # The objects are shown, not simulated: the scenarios move them by script, not by grasp.
+        _static_geom(world, 'plate', mujoco.mjtGeom.mjGEOM_CYLINDER,
+                     (PLATE_RADIUS, PLATE_THICKNESS / 2), plate_position(plate_stand_xy),
+                     (0.9, 0.9, 0.95, 1), collide=False)
+        screw = screw_position(screw_stand_xy)
+        _static_geom(world, 'screw', mujoco.mjtGeom.mjGEOM_CYLINDER, (0.006, 0.025),
+                     screw - np.array([0, 0, 0.025]), (0.75, 0.75, 0.2, 1), collide=False)
+    if pole:
+        _static_geom(world, 'pole', mujoco.mjtGeom.mjGEOM_CYLINDER, (pole_radius, pole_height / 2),
+                     (pole_xy[0], pole_xy[1], TABLE_TOP_Z + pole_height / 2), (0.2, 0.5, 0.9, 1))
+
+    wrist = world.add_body(name=HUMAN_WRIST, mocap=True, pos=list(HUMAN_WRIST_DEFAULT))
+    wrist.add_site(name=HUMAN_WRIST, size=[0.03, 0, 0], rgba=[0.9, 0.2, 0.2, 0.8])
+    return spec
+
+
+def build_scene(pole: bool = False, stands: bool = True, **kwargs) -> mujoco.MjModel:
+    """Compiled MuJoCo model of the iiwa 14 scene; see build_spec for the options."""
+    return build_spec(pole=pole, stands=stands, **kwargs).compile()

@@ -1,0 +1,290 @@
+"""Joint trajectory acceptance and interpolation with the semantics of ros2_controllers' JTC.
+
+Acceptance (validate_trajectory) follows JointTrajectoryController::validate_trajectory_msg with
+the default parameters (allow_partial_joints_goal=false, allow_nonzero_velocity_at_trajectory_end=
+false, allow_integration_in_goal_trajectories=false) plus checks JTC lacks: every value finite and
+no duplicate joint names. Interpolation (TrajectoryFollower) follows JTC's Trajectory::sample:
+per segment linear when either end lacks velocities, cubic with velocities, quintic with velocities
+and accelerations; before the first point, a segment from the state measured when the trajectory
+is first sampled; after the last point, hold it. Times are seconds on the caller's clock; None as a
+start time means "when first sampled".
+No ROS types here: the node converts messages into TrajectoryPoint lists.
+"""
+
+from __future__ import annotations
+
+from bisect import bisect_right
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+
+@dataclass
+class TrajectoryPoint:
+    """One waypoint as received (joint order of the message). Empty sequences mean 'not given'."""
+
+    time_from_start: float
+    positions: Sequence[float] = ()
+    velocities: Sequence[float] = ()
+    accelerations: Sequence[float] = ()
+
+
+@dataclass
+class JointTrajectory:
+    """An accepted trajectory, remapped to the controller's joint order.
+
+    velocities/accelerations rows of points that did not give them are NaN-free zeros with the
+    matching has_velocities/has_accelerations entry False.
+    """
+
+    start_time: float | None
+    times: np.ndarray
+    positions: np.ndarray
+    velocities: np.ndarray
+    accelerations: np.ndarray
+    has_velocities: np.ndarray
+    has_accelerations: np.ndarray
+
+    @property
+    def end_time(self) -> float | None:
+        return None if self.start_time is None else self.start_time + float(self.times[-1])
+
+
+def points_from_arrays(times, positions, velocities=None,
+                       accelerations=None) -> list[TrajectoryPoint]:
+    """TrajectoryPoints from times (n,), positions (n, dof) and optional (n, dof) derivatives."""
+    times = np.asarray(times, dtype=float)
+    positions = np.asarray(positions, dtype=float)
+    if positions.ndim != 2 or times.shape != (positions.shape[0],):
+        raise ValueError(f'times {times.shape} and positions {positions.shape} do not match')
+    out = []
+    for i, t in enumerate(times):
+        out.append(TrajectoryPoint(
+            float(t), positions[i].tolist(),
+            [] if velocities is None else np.asarray(velocities[i], dtype=float).tolist(),
+            [] if accelerations is None else np.asarray(accelerations[i], dtype=float).tolist()))
+    return out
+
+
+def validate_trajectory(joint_names: Sequence[str], points: Sequence[TrajectoryPoint],
+                        start_time: float | None, now: float, controller_joints: Sequence[str], *,
+                        allow_partial_joints_goal: bool = False,
+                        allow_nonzero_velocity_at_trajectory_end: bool = False,
+                        fill_positions=None) -> JointTrajectory | str:
+    """The accepted trajectory in controller joint order, or the reason for rejecting it.
+
+    start_time: when time_from_start = 0 happens, on the same clock as `now` (None: start now).
+    fill_positions: positions (controller order) used for joints a partial goal leaves out.
+    """
+    dof = len(controller_joints)
+    names = list(joint_names)
+    if not names:
+        return 'empty joint_names'
+    if not allow_partial_joints_goal and len(names) != dof:
+        return (f'trajectory has {len(names)} joints, the controller has {dof} '
+                '(partial goals are off)')
+    for name in names:
+        if name not in controller_joints:
+            return f'unknown joint {name!r}'
+    if len(set(names)) != len(names):
+        return 'duplicate joint names'
+    if len(points) == 0:
+        return 'empty trajectory: no points'
+    n = len(names)
+    for i, point in enumerate(points):
+        for field_name, allow_empty in (('positions', False), ('velocities', True),
+                                        ('accelerations', True)):
+            values = getattr(point, field_name)
+            if allow_empty and len(values) == 0:
+                continue
+            if len(values) != n:
+                return (f'point {i}: {field_name} has {len(values)} values for {n} joint names')
+            if not np.all(np.isfinite(np.asarray(values, dtype=float))):
+                return f'point {i}: non-finite value in {field_name}'
+        if not np.isfinite(point.time_from_start):
+            return f'point {i}: non-finite time_from_start'
+        if i > 0 and not point.time_from_start > points[i - 1].time_from_start:
+            return (f'time_from_start not strictly increasing at point {i} '
+                    f'({points[i - 1].time_from_start} then {point.time_from_start})')
+    if start_time is not None:
+        if not np.isfinite(start_time):
+            return 'non-finite start time'
+        end = start_time + points[-1].time_from_start
+        if end < now:
+            return f'trajectory ends in the past (ends at {end:.6f}, now {now:.6f})'
+    if not allow_nonzero_velocity_at_trajectory_end:
+        last = np.asarray(points[-1].velocities, dtype=float)
+        # Same threshold as JTC: float epsilon.
+        if last.size and np.any(np.abs(last) > np.finfo(np.float32).eps):
+            return 'velocity of the last point is not zero'
+
+    index = [list(controller_joints).index(name) for name in names]
+    m = len(points)
+    times = np.array([p.time_from_start for p in points], dtype=float)
+    pos = np.zeros((m, dof))
+    vel = np.zeros((m, dof))
+    acc = np.zeros((m, dof))
+    has_v = np.array([len(p.velocities) > 0 for p in points])
+    has_a = np.array([len(p.accelerations) > 0 for p in points])
+    if n < dof:
+        if fill_positions is None:
+            return 'partial goal but no positions to fill the missing joints'
+        fill = np.asarray(fill_positions, dtype=float)
+        if fill.shape != (dof,) or not np.all(np.isfinite(fill)):
+            return 'partial goal but fill positions are not finite'
+        pos[:] = fill
+    for i, p in enumerate(points):
+        pos[i, index] = p.positions
+        if has_v[i]:
+            vel[i, index] = p.velocities
+        if has_a[i]:
+            acc[i, index] = p.accelerations
+    return JointTrajectory(start_time=None if start_time is None else float(start_time),
+                           times=times, positions=pos, velocities=vel, accelerations=acc,
+                           has_velocities=has_v, has_accelerations=has_a)
+
+
+def segment_coefficients(T, p0, v0, a0, p1, v1, a1, kind: str) -> np.ndarray:
+    """Polynomial coefficients c (6, dof), p(s) = sum_k c_k s^k for s in [0, T]."""
+    dof = len(p0)
+    c = np.zeros((6, dof))
+    c[0] = p0
+    if kind == 'linear':
+        c[1] = (p1 - p0) / T
+    elif kind == 'cubic':
+        c[1] = v0
+        c[2] = (3 * (p1 - p0) - (2 * v0 + v1) * T) / T**2
+        c[3] = (2 * (p0 - p1) + (v0 + v1) * T) / T**3
+    elif kind == 'quintic':
+        c[1] = v0
+        c[2] = a0 / 2
+        c[3] = (20 * (p1 - p0) - (8 * v1 + 12 * v0) * T - (3 * a0 - a1) * T**2) / (2 * T**3)
+        c[4] = (30 * (p0 - p1) + (14 * v1 + 16 * v0) * T + (3 * a0 - 2 * a1) * T**2) / (2 * T**4)
+        c[5] = (12 * (p1 - p0) - 6 * (v1 + v0) * T - (a0 - a1) * T**2) / (2 * T**5)
+    else:
+        raise ValueError(f'unknown segment kind {kind!r}')
+    return c
+
+
+def _kind(has_v0, has_a0, has_v1, has_a1) -> str:
+    if has_v0 and has_v1:
+        return 'quintic' if (has_a0 and has_a1) else 'cubic'
+    return 'linear'
+
+
+@dataclass
+class _Plan:
+    t0: list                           # segment start times (absolute)
+    duration: list                     # segment durations
+    coeffs: np.ndarray                 # (nseg, 6, dof)
+    final: np.ndarray                  # last positions
+    end_time: float
+    kinds: list = field(default_factory=list)
+
+
+class TrajectoryFollower:
+    """The active trajectory and its reference samples (JTC's Trajectory::sample semantics).
+
+    set() replaces the active trajectory; the next sample() anchors it: start_time None becomes
+    the sample time, and if the first point lies in the future a segment from the state given to
+    sample() (measured positions and velocities, as JTC in closed loop; with open_loop, the old
+    trajectory's reference at that time) leads to it. A start in
+    the past is sampled at the current time on the trajectory's own time axis.
+    """
+
+    def __init__(self, dof: int = 7, open_loop: bool = False):
+        self.dof = dof
+        # JTC's open_loop_control: blend a replacement from the old trajectory's reference at
+        # the switch time instead of the measured state.
+        self.open_loop = open_loop
+        self._basis = np.zeros((3, 6))
+        self._basis[0, 0] = 1.0
+        self._basis[1, 1] = 1.0
+        self._basis[2, 2] = 2.0
+        self._pending: JointTrajectory | None = None
+        self._plan: _Plan | None = None
+
+    @property
+    def active(self) -> bool:
+        return self._plan is not None or self._pending is not None
+
+    @property
+    def finished_at(self) -> float | None:
+        """Absolute time of the last point of the anchored trajectory (None if none anchored)."""
+        return None if self._plan is None else self._plan.end_time
+
+    def set(self, trajectory: JointTrajectory) -> None:
+        self._pending = trajectory
+
+    def clear(self) -> None:
+        self._pending = None
+        self._plan = None
+
+    def _anchor(self, traj: JointTrajectory, t: float, q, qd) -> _Plan:
+        start = t if traj.start_time is None else traj.start_time
+        abs_times = start + traj.times
+        t0, dur, coeffs, kinds = [], [], [], []
+        if t < abs_times[0]:
+            # From the current state (positions and velocities, no accelerations, like JTC).
+            kind = _kind(True, False, traj.has_velocities[0], traj.has_accelerations[0])
+            T = abs_times[0] - t
+            coeffs.append(segment_coefficients(T, np.asarray(q, float), np.asarray(qd, float),
+                                               np.zeros(self.dof), traj.positions[0],
+                                               traj.velocities[0], traj.accelerations[0], kind))
+            t0.append(t)
+            dur.append(T)
+            kinds.append(kind)
+        for i in range(len(traj.times) - 1):
+            kind = _kind(traj.has_velocities[i], traj.has_accelerations[i],
+                         traj.has_velocities[i + 1], traj.has_accelerations[i + 1])
+            T = abs_times[i + 1] - abs_times[i]
+            coeffs.append(segment_coefficients(
+                T, traj.positions[i], traj.velocities[i], traj.accelerations[i],
+                traj.positions[i + 1], traj.velocities[i + 1], traj.accelerations[i + 1], kind))
+            t0.append(abs_times[i])
+            dur.append(T)
+            kinds.append(kind)
+        # Plain float lists: bisect and scalar arithmetic on them are much faster than on arrays.
+        return _Plan(t0=[float(x) for x in t0], duration=[float(x) for x in dur],
+                     coeffs=np.array(coeffs).reshape(len(coeffs), 6, self.dof),
+                     final=traj.positions[-1].copy(), end_time=float(abs_times[-1]), kinds=kinds)
+
+    def sample(self, t: float, q, qd):
+        """(q_ref, qd_ref, qdd_ref) at time t, or None when there is no trajectory."""
+        if self._pending is not None:
+            if self.open_loop and self._plan is not None:
+                q, qd, _ = self._sample_plan(self._plan, t)
+            self._plan = self._anchor(self._pending, t, q, qd)
+            self._pending = None
+        if self._plan is None:
+            return None
+        return self._sample_plan(self._plan, t)
+
+    def _sample_plan(self, plan: _Plan, t: float):
+        if t >= plan.end_time or len(plan.t0) == 0:
+            zero = np.zeros(self.dof)
+            return plan.final.copy(), zero, zero.copy()
+        i = bisect_right(plan.t0, t) - 1
+        if i < 0:
+            i = 0
+        s = min(max(t - plan.t0[i], 0.0), plan.duration[i])
+        s2 = s * s
+        s3 = s2 * s
+        # Position, velocity and acceleration rows of the power basis, one small matrix product
+        # (filled in place: this runs at 1 kHz and numpy call overhead dominates).
+        b = self._basis
+        b[0, 1] = s
+        b[0, 2] = s2
+        b[0, 3] = s3
+        b[0, 4] = s3 * s
+        b[0, 5] = s3 * s2
+        b[1, 2] = 2 * s
+        b[1, 3] = 3 * s2
+        b[1, 4] = 4 * s3
+        b[1, 5] = 5 * s3 * s
+        b[2, 3] = 6 * s
+        b[2, 4] = 12 * s2
+        b[2, 5] = 20 * s3
+        out = b @ plan.coeffs[i]
+        return out[0], out[1], out[2]

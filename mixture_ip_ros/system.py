@@ -1,0 +1,137 @@
+"""The closed loop in one process: bag_player -> observer -> estimator -> sim, on simulated time.
+
+The four real nodes talk over DDS on a private domain; an InteractionRecorder listens. The sim
+node owns the clock (/clock, paced at ``real_time_factor``), every other node runs with
+use_sim_time, and the player publishes each bag message when the simulated clock reaches its
+recorded time (stamps rewritten to that time). Used by ``mixture-ip demo`` and the integration
+tests.
+"""
+
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.parameter import Parameter
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from mixture_ip_ros.nodes.bag_player import BagPlayer
+from mixture_ip_ros.nodes.estimator_node import EstimatorNode
+from mixture_ip_ros.nodes.observer_node import ObserverNode
+from mixture_ip_ros.nodes.recorder import InteractionRecorder
+from mixture_ip_ros.nodes.sim_node import SimNode
+from mixture_ip_ros.record import InteractionRecord
+from mixture_ip_ros.robot.kinematics import IiwaKinematics
+
+
+def _params(d: dict):
+    return [Parameter(k, value=v) for k, v in d.items()]
+
+
+class ClosedLoop:
+    """Start the nodes once, then ``run_interaction(bag)`` per replayed demonstration."""
+
+    def __init__(self, model_path, *, domain_id=None, real_time_factor=1.0, home=None,
+                 sim_params=None, observer_params=None, estimator_params=None):
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        sim_time = [Parameter('use_sim_time', value=True)]
+        self.sim = SimNode(context=self.context, parameter_overrides=_params(
+            {'simulated_time': True, 'real_time_factor': float(real_time_factor),
+             **(sim_params or {})}))
+        self.observer = ObserverNode(context=self.context, parameter_overrides=sim_time + _params(
+            observer_params or {}))
+        self.estimator = EstimatorNode(context=self.context, parameter_overrides=sim_time + _params(
+            {'model_path': str(model_path), **(estimator_params or {})}))
+        self.recorder = InteractionRecorder(context=self.context, parameter_overrides=sim_time)
+        self.home = np.asarray(home if home is not None else self.sim.sim.q, dtype=float)
+        self._home_pub = self.recorder.create_publisher(JointTrajectory, '/iiwa/joint_trajectory',
+                                                        10)
+        self.kinematics = IiwaKinematics()
+        self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
+        for node in (self.sim, self.observer, self.estimator, self.recorder):
+            self.executor.add_node(node)
+        self._spin = threading.Thread(target=self.executor.spin, daemon=True)
+        self._spin.start()
+        self.labels = (self.estimator.metadata.get('component_labels')
+                       or [f'component_{k}' for k in range(self.estimator.model.n_components)])
+
+    # ------------------------------------------------------------------ time
+    def now(self) -> float:
+        return self.sim.sim.time
+
+    def wait_sim(self, seconds: float, timeout: float = 120.0):
+        """Block until the simulated clock advanced by ``seconds``."""
+        end = self.now() + seconds
+        deadline = time.monotonic() + timeout
+        while self.now() < end:
+            if time.monotonic() > deadline:
+                raise TimeoutError('the simulation stopped advancing')
+            time.sleep(0.005)
+
+    def go_home(self, duration: float = 2.0):
+        """Send the robot back to its start posture and wait until it is there."""
+        msg = JointTrajectory()
+        msg.joint_names = list(self.sim.sim.joint_names)
+        pt = JointTrajectoryPoint(positions=self.home.tolist(), velocities=[0.0] * 7)
+        pt.time_from_start.sec = int(duration)
+        pt.time_from_start.nanosec = int((duration % 1) * 1e9)
+        msg.points = [pt]
+        self._home_pub.publish(msg)
+        self.wait_sim(duration + 0.3)
+
+    # ------------------------------------------------------------------ one interaction
+    def run_interaction(self, bag, *, true_pattern=None, target=None, settle=1.5,
+                        extra_params=None, timeout=120.0) -> InteractionRecord:
+        """Replay ``bag`` through the loop; returns what happened."""
+        self.recorder.clear()
+        start = self.now()
+        player = BagPlayer(context=self.context, parameter_overrides=[
+            Parameter('use_sim_time', value=True)] + _params(
+            {'bag': str(bag), 'rewrite_stamps': True, **(extra_params or {})}))
+        self.executor.add_node(player)
+        try:
+            if not player.wait_until_finished(timeout):
+                raise TimeoutError(f'playing {bag} did not finish within {timeout} s')
+            self.wait_sim(settle)
+        finally:
+            self.executor.remove_node(player)
+            player.destroy_node()
+        return self._record(Path(bag).name, true_pattern, target, start)
+
+    def _record(self, name, true_pattern, target, start) -> InteractionRecord:
+        snap = self.recorder.snapshot()
+        joints = [(t, q) for t, q in snap['joints'] if t >= start]
+        flange = [(t, p) for t, p in snap['flange'] if t >= start]
+        inter = self.estimator.interactions[-1] if self.estimator.interactions else {}
+        K = len(self.labels)
+        post = np.array([d for _, d in snap['posterior']]) if snap['posterior'] else np.zeros(
+            (0, K + 4))
+        events = dict((kind, t) for t, kind in reversed(snap['events']))
+        k = inter.get('final_component')
+        k = inter.get('component') if k is None else k
+        commit_phase = inter.get('commit_phase')
+        return InteractionRecord(
+            name=name, true_pattern=true_pattern, component_labels=list(self.labels),
+            t=np.array([t for t, _ in joints]), q=np.array([q for _, q in joints]),
+            flange=np.array([p for _, p in flange]),
+            wrist_t=np.array([t for t, _ in snap['wrist']]),
+            wrist=np.array([p for _, p in snap['wrist']]).reshape(-1, 3),
+            posterior_t=np.array([t for t, _ in snap['posterior']]),
+            posterior=post[:, :K], alpha=post[:, K], phase=post[:, K + 1],
+            onset_time=events.get('onset'), end_time=events.get('end'),
+            commit_time=inter.get('commit_time'),
+            chosen_pattern=self.labels[k] if k is not None else None,
+            commit_fraction=commit_phase, target=None if target is None else np.asarray(target),
+            extra={'interaction': inter, 'non_finite_commands': self.recorder.non_finite_commands,
+                   'sim_rejections': self.sim.rejection_count})
+
+    def close(self):
+        self.executor.shutdown()
+        for node in (self.sim, self.observer, self.estimator, self.recorder):
+            node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+        self._spin.join(timeout=5)

@@ -1,0 +1,412 @@
+"""Estimator planning without ROS: plans against the OnlineEstimator's own prediction, commit
+rule, interaction bookkeeping and rejection of bad input."""
+
+import numpy as np
+import pytest
+
+from mixture_ip_ros.core.online import OnlineEstimator
+from mixture_ip_ros.data.model_file import load_model
+from mixture_ip_ros.planning import (
+    InteractionPlanner, LatencyStats, Plan, build_plan, check_plan, posterior_summary,
+    should_commit, summary_labels)
+from mixture_ip_ros.training import train_to_file
+
+from synthetic import mixture_demos
+
+HELD_OUT = (0, 13, 30)   # one demonstration of each pattern, not used for training
+
+
+@pytest.fixture(scope='module')
+def trained(tmp_path_factory):
+    demos = mixture_demos(seed=0, n_obs=3, n_ctrl=7, n_basis=8)[0]
+    train = [d for i, d in enumerate(demos) if i not in HELD_OUT]
+    path = tmp_path_factory.mktemp('model') / 'model.npz'
+    train_to_file(train, path, n_components=3, n_basis=8)
+    model, meta = load_model(path)
+    return model, meta, [demos[i] for i in HELD_OUT]
+
+
+@pytest.fixture(scope='module')
+def noisy(tmp_path_factory):
+    """A model assuming a noisy sensor (0.8 m): confidence grows over several observations
+    instead of after the first one, so the threshold, not min_observations, gates the commit."""
+    demos = mixture_demos(seed=0, n_obs=3, n_ctrl=7, n_basis=8)[0]
+    train = [d for i, d in enumerate(demos) if i not in HELD_OUT]
+    path = tmp_path_factory.mktemp('noisy') / 'model.npz'
+    train_to_file(train, path, n_components=3, n_basis=8, observation_noise=0.8)
+    model, meta = load_model(path)
+    return model, meta, [demos[i] for i in HELD_OUT]
+
+
+def _feed(est, demo, until=np.inf):
+    for t, y in zip(demo.t, demo.observed):
+        if t > until:
+            break
+        est.update(t, y)
+
+
+def _ns(t):
+    return int(round(t * 1e9))
+
+
+def _t(t):
+    """The time the planner sees for an observation stamped onset + t (ns resolution)."""
+    return _ns(t) * 1e-9
+
+
+def test_plan_follows_the_map_prediction_from_now_to_the_end(trained):
+    model, _, held = trained
+    demo = held[1]
+    est = OnlineEstimator(model)
+    _feed(est, demo, until=0.4 * demo.duration)
+    t_now = float(demo.t[demo.t <= 0.4 * demo.duration][-1])
+    plan = build_plan(est, t_now, n_points=25, lookahead=0.1)
+    k, alpha = est.map_hypothesis()
+    assert (plan.component, plan.alpha, plan.final) == (k, alpha, False)
+    assert plan.positions.shape == plan.velocities.shape == plan.accelerations.shape == (25, 7)
+    assert plan.times.shape == plan.phases.shape == (25,)
+    assert check_plan(plan) is None
+    assert np.all(np.diff(plan.times) > 0)
+    # time_from_start = z / alpha*, from the lookahead point to the end of the movement
+    assert np.allclose(plan.times, plan.phases / alpha, rtol=0, atol=1e-12)
+    assert plan.times[0] == pytest.approx(t_now + 0.1, abs=1e-12)
+    assert plan.phases[-1] == 1.0
+    ref = est.predict(plan.phases)
+    assert np.allclose(plan.positions, ref['controlled']['position'], atol=1e-12)
+    assert np.allclose(plan.velocities[:-1], ref['controlled']['velocity'][:-1], atol=1e-12)
+    assert np.allclose(plan.accelerations[:-1], ref['controlled']['acceleration'][:-1],
+                       atol=1e-12)
+    assert not plan.velocities[-1].any() and not plan.accelerations[-1].any()
+    # the whole predicted wrist movement, phases 0..1
+    assert np.allclose(plan.wrist_phases, np.linspace(0, 1, 25))
+    assert np.allclose(plan.wrist_times, plan.wrist_phases / alpha)
+    assert np.allclose(plan.wrist_positions, est.predict(plan.wrist_phases)['observed']['position'])
+
+
+def test_plan_velocities_are_time_derivatives_of_positions(trained):
+    model, _, held = trained
+    est = OnlineEstimator(model)
+    _feed(est, held[0], until=0.3)
+    plan = build_plan(est, 0.3, n_points=2001, lookahead=0.0)
+    dt = np.diff(plan.times)
+    fd_vel = np.diff(plan.positions, axis=0) / dt[:, None]          # midpoints
+    mid_vel = 0.5 * (plan.velocities[1:] + plan.velocities[:-1])
+    scale = np.abs(plan.velocities).max()
+    assert np.abs(fd_vel[:-1] - mid_vel[:-1]).max() < 1e-4 * scale
+    fd_acc = np.diff(plan.velocities[:-1], axis=0) / dt[:-1, None]
+    mid_acc = 0.5 * (plan.accelerations[1:-1] + plan.accelerations[:-2])
+    assert np.abs(fd_acc[:-1] - mid_acc[:-1]).max() < 1e-3 * np.abs(plan.accelerations).max()
+
+
+def test_human_at_rest_gives_a_single_point_at_the_final_posture(trained):
+    model, _, held = trained
+    demo = held[2]
+    est = OnlineEstimator(model)
+    _feed(est, demo)
+    k, alpha = est.map_hypothesis()
+    t_now = float(demo.t[-1]) + 0.2                     # past 1 / alpha*
+    assert alpha * t_now > 1
+    plan = build_plan(est, t_now, lookahead=0.1, settle_time=0.5)
+    assert plan.final and plan.times.tolist() == [t_now + 0.5] and plan.phases.tolist() == [1.0]
+    assert np.allclose(plan.positions[0], est.predict([1.0])['controlled']['position'][0])
+    assert not plan.velocities.any() and not plan.accelerations.any()
+    assert check_plan(plan) is None
+    # the final posture matches the held-out demonstration's (an independent check)
+    assert np.abs(plan.positions[0] - demo.controlled[-1]).max() < 0.1
+
+
+def test_check_plan_refuses_nan_non_increasing_times_and_motion_at_the_end(trained):
+    model, _, held = trained
+    est = OnlineEstimator(model)
+    _feed(est, held[0], until=0.3)
+    good = build_plan(est, 0.3, n_points=5)
+
+    def changed(**kw):
+        fields = dict(good.__dict__)
+        fields.update(kw)
+        return Plan(**fields)
+    pos = good.positions.copy()
+    pos[2, 3] = np.nan
+    assert 'positions' in check_plan(changed(positions=pos))
+    wrist = good.wrist_positions.copy()
+    wrist[0, 0] = np.inf
+    assert 'wrist_positions' in check_plan(changed(wrist_positions=wrist))
+    times = good.times.copy()
+    times[3] = times[2]
+    assert 'increasing' in check_plan(changed(times=times))
+    vel = good.velocities.copy()
+    vel[-1, 0] = 1e-3
+    assert 'rest' in check_plan(changed(velocities=vel))
+
+
+def test_posterior_summary_layout(trained):
+    model, _, held = trained
+    est = OnlineEstimator(model)
+    _feed(est, held[0], until=0.5)
+    s = posterior_summary(est, 0.5)
+    k, alpha = est.map_hypothesis()
+    p = est.component_posterior()
+    assert summary_labels(3) == ['p0', 'p1', 'p2', 'alpha', 'phase', 'confidence', 'component']
+    assert np.allclose(s, list(p) + [alpha, min(alpha * 0.5, 1.0), p[k], k])
+
+
+def test_commit_rule():
+    assert not should_commit([0.05, 0.95], 2, 0.9, 3)       # too few observations
+    assert not should_commit([0.15, 0.85], 5, 0.9, 3)       # not confident
+    assert should_commit([0.1, 0.9], 3, 0.9, 3)
+
+
+def _planner(model, meta, **kw):
+    est = OnlineEstimator(model)
+    kw.setdefault('labels', meta['component_labels'])
+    return InteractionPlanner(est, **kw), OnlineEstimator(model)
+
+
+@pytest.mark.parametrize('which, threshold, min_obs, gate', [
+    ('trained', 0.9, 3, 'min_observations'),
+    ('noisy', 0.9, 1, 'confidence'),
+    ('noisy', 0.98, 4, 'confidence'),
+])
+def test_interaction_commits_when_the_oracle_passes_the_threshold(request, which, threshold,
+                                                                   min_obs, gate):
+    model, meta, held = request.getfixturevalue(which)
+    demo = held[1]
+    onset = 1_700_000_000_000_000_000
+    planner, oracle = _planner(model, meta, confidence_threshold=threshold,
+                               min_observations=min_obs)
+    planner.onset(onset)
+    expected = None
+    for t, y in zip(demo.t, demo.observed):
+        result = planner.observe(onset + _ns(t), y)
+        used = oracle.update(_t(t), y)
+        assert result == ('used' if used else 'skipped')
+        step = planner.step()
+        if expected is None and should_commit(oracle.component_posterior(),
+                                              oracle.n_observations, threshold, min_obs):
+            expected = (oracle.phase(_t(t)), oracle.n_observations, oracle.map_hypothesis()[0],
+                        _t(t))
+            assert step.send and step.committed_now
+        elif expected is None:
+            assert not step.send and planner.state == 'observing'
+        else:
+            assert step.send and not step.committed_now
+    assert expected is not None
+    if gate == 'confidence':      # the threshold held the robot back after min_observations
+        assert expected[1] > min_obs
+    else:
+        assert expected[1] == min_obs
+    rec = planner.current
+    assert rec['commit_phase'] == pytest.approx(expected[0], abs=1e-12)
+    assert 0 < rec['commit_phase'] < 1
+    assert rec['commit_observations'] == expected[1]
+    assert rec['commit_component'] == expected[2]
+    assert rec['commit_elapsed'] == expected[3]
+    assert rec['commit_time'] == pytest.approx(onset * 1e-9 + expected[3], abs=1e-6)
+    assert rec['onset_time'] == onset * 1e-9
+    # the pattern is recognised: the chosen component's label is the demonstration's
+    assert rec['label'] == demo.label
+    assert rec['n_observations'] == oracle.n_observations
+    final = planner.end(onset + _ns(demo.t[-1]))
+    assert final.send and planner.state == 'done' and rec['end_reason'] == 'end'
+    assert rec['end_elapsed'] == _t(demo.t[-1])
+    assert rec['end_time'] == pytest.approx((onset + _ns(demo.t[-1])) * 1e-9, abs=1e-6)
+    assert (rec['final_component'], rec['final_label']) == (oracle.map_hypothesis()[0],
+                                                            demo.label)
+    assert np.allclose(final.plan.positions[-1],
+                       oracle.predict([1.0])['controlled']['position'][0], atol=1e-12)
+    assert planner.step() is None                     # nothing after the end
+
+
+def test_end_without_commit_sends_nothing(noisy):
+    model, meta, held = noisy
+    planner, _ = _planner(model, meta, confidence_threshold=0.999)
+    planner.onset(0)
+    for t, y in zip(held[0].t[:6], held[0].observed[:6]):
+        planner.observe(_ns(t), y)
+    step = planner.end(_ns(held[0].t[5]))
+    assert not step.send and planner.current['commit_phase'] is None
+    assert planner.plans_sent == 0 and planner.state == 'done'
+
+
+def test_planner_steps_only_when_something_is_new(trained):
+    model, meta, held = trained
+    planner, _ = _planner(model, meta)
+    assert planner.step() is None                          # idle
+    planner.onset(0)
+    assert planner.step() is not None                      # the prior, after the onset
+    assert planner.step() is None
+    planner.observe(_ns(0.1), held[0].observed[10])
+    assert planner.step() is not None
+
+
+def test_switching_component_mid_way_is_recorded(trained):
+    """Start like one pattern, continue like another: the plans follow the MAP component."""
+    model, meta, held = trained
+    a, b = held[0], held[1]
+    planner, oracle = _planner(model, meta)
+    planner.onset(0)
+    ks = []
+    for t, y in [(t, y) for t, y in zip(a.t, a.observed) if t <= 0.1] + \
+                [(t, y) for t, y in zip(b.t, b.observed) if t > 0.1]:
+        planner.observe(_ns(t), y)
+        oracle.update(_t(t), y)
+        step = planner.step()
+        if step is not None and step.send:
+            ks.append(oracle.map_hypothesis()[0])
+            assert step.plan.component == ks[-1]
+            assert step.switched_from == (ks[-2] if len(ks) > 1 and ks[-2] != ks[-1] else None)
+    expected = [{'from': p, 'to': n} for p, n in zip(ks, ks[1:]) if p != n]
+    assert expected, 'the scenario should switch at least once'
+    assert [{'from': s['from'], 'to': s['to']} for s in planner.current['switches']] == expected
+    assert planner.current['label'] == b.label
+    assert planner.current['commit_component'] == ks[0] != planner.current['component']
+    planner.end(_ns(b.t[-1]))
+    assert planner.current['final_component'] == ks[-1]
+
+
+def test_bad_input_is_counted_and_estimation_goes_on(trained):
+    model, meta, held = trained
+    demo = held[2]
+    planner, oracle = _planner(model, meta)
+    onset = 5_000_000_000
+    # before any onset: held, then dropped when the onset turns out to be later
+    assert planner.observe(onset - _ns(0.5), demo.observed[0]) == 'held'
+    # arrives before its onset event but is stamped after it: replayed at the onset
+    assert planner.observe(onset + _ns(demo.t[0]), demo.observed[0]) == 'held'
+    assert planner.onset(onset) == ['outside_interaction']
+    oracle.update(_t(demo.t[0]), demo.observed[0])
+    assert planner.current['n_observations'] == 1
+    assert planner.observe(onset - 1, demo.observed[1]) == 'before_onset'
+    assert planner.observe(onset + _ns(0.3), [np.nan, 0.0, 0.0]) == 'non_finite'
+    assert planner.observe(onset + _ns(0.3), [0.0, 0.0]) == 'non_finite'
+    for t, y in zip(demo.t[1:], demo.observed[1:]):
+        assert planner.observe(onset + _ns(t), y) in ('used', 'skipped')
+        oracle.update(_t(t), y)
+    assert planner.observe(onset + _ns(demo.t[5]), demo.observed[5]) == 'time_backwards'
+    assert planner.observe(onset + _ns(demo.t[-1]), demo.observed[-1]) == 'time_backwards'
+    assert planner.rejected == {'wrong_frame': 0, 'non_finite': 2, 'outside_interaction': 1,
+                                'before_onset': 1, 'time_backwards': 2, 'exception': 0,
+                                'bad_joint_state': 0}
+    assert planner.current['n_rejected'] == 5
+    step = planner.step()
+    assert step.send
+    assert np.allclose(step.plan.positions, oracle.predict(step.plan.phases)['controlled']
+                       ['position'], atol=1e-12)
+    planner.end(onset + _ns(demo.t[-1]))
+    # after the end: held for a possible next onset, never fed to the finished interaction
+    n = planner.current['n_observations']
+    assert planner.observe(onset + _ns(demo.t[-1] + 0.1), demo.observed[-1]) == 'held'
+    assert planner.current['n_observations'] == n and planner.n_pending == 1
+
+
+def test_pending_observations_are_bounded(trained):
+    model, meta, held = trained
+    planner, _ = _planner(model, meta, pending_limit=3)
+    results = [planner.observe(_ns(0.01 * i), held[0].observed[i]) for i in range(5)]
+    assert results == ['held'] * 3 + ['outside_interaction'] * 2
+    assert planner.n_pending == 3
+    planner.onset(_ns(0.03))                               # keeps 0.03, 0.04
+    assert planner.rejected['outside_interaction'] == 3
+    assert planner.current['n_received'] == 2
+
+
+def test_new_onset_closes_the_unfinished_interaction(trained):
+    model, meta, held = trained
+    planner, _ = _planner(model, meta)
+    planner.onset(0)
+    planner.observe(_ns(0.1), held[0].observed[10])
+    planner.onset(_ns(2.0))
+    assert [r['end_reason'] for r in planner.interactions] == ['new_onset', None]
+    assert planner.estimator.n_observations == 0 and planner.state == 'observing'
+
+
+def test_invalid_settings_are_refused(trained):
+    model, _, _ = trained
+    est = OnlineEstimator(model)
+    for kw in ({'confidence_threshold': 0.0}, {'confidence_threshold': 1.5},
+               {'min_observations': 0}, {'n_points': 1}, {'lookahead': -0.1},
+               {'settle_time': 0.0}, {'labels': ['a']}):
+        with pytest.raises(ValueError):
+            InteractionPlanner(est, **kw)
+
+
+def test_latency_stats():
+    s = LatencyStats()
+    for v in (1e-4, 3e-4, 2e-4):
+        s.add(v)
+    assert (s.count, s.last_us, s.max_us) == (3, pytest.approx(200), pytest.approx(300))
+    assert s.mean_us == pytest.approx(200)
+
+
+def test_plans_pass_the_controllers_trajectory_acceptance(trained):
+    """joint_trajectory_controller semantics (robot.trajectory): finite, strictly increasing,
+    at rest at the end, not over before 'now' (start = onset, now = the latest observation
+    plus some delivery latency)."""
+    from mixture_ip_ros.robot.trajectory import points_from_arrays, validate_trajectory
+    from mixture_ip_ros.training import JOINT_NAMES
+    model, _, held = trained
+    demo = held[0]
+    est = OnlineEstimator(model)
+    onset = 100.0
+    for frac in (0.2, 0.6, 1.0, 1.3):
+        t_now = frac * demo.duration
+        est.reset()
+        _feed(est, demo, until=t_now)
+        plan = build_plan(est, t_now, n_points=25, lookahead=0.1, settle_time=0.5)
+        assert plan.final == (frac >= 1.0)
+        pts = points_from_arrays(plan.times, plan.positions, plan.velocities, plan.accelerations)
+        accepted = validate_trajectory(list(JOINT_NAMES), pts, onset, onset + t_now + 0.05,
+                                       list(JOINT_NAMES))
+        assert not isinstance(accepted, str), accepted
+
+
+def test_final_posture_time_does_not_recede_while_the_human_rests(trained):
+    model, meta, held = trained
+    demo = held[2]
+    planner, oracle = _planner(model, meta, settle_time=0.5, lookahead=0.1)
+    planner.onset(0)
+    finals = []
+    rest_t = demo.t[-1] + 0.01 * np.arange(1, 80)         # the human holds still 0.8 s
+    for t, y in list(zip(demo.t, demo.observed)) + [(t, demo.observed[-1]) for t in rest_t]:
+        planner.observe(_ns(t), y)
+        step = planner.step()
+        if step is not None and step.send and step.plan.final:
+            finals.append((_t(t), step.plan.times[0]))
+    assert len(finals) > 10
+    anchor, anchors = None, 0
+    for t_now, t_final in finals:
+        if anchor is None or not anchor >= t_now + 0.1:   # kept while >= lookahead ahead
+            anchor = t_now + 0.5
+            anchors += 1
+        assert t_final == anchor
+    assert anchors >= 2                             # the 0.8 s rest outlasts the first one
+
+
+def test_interaction_records_are_bounded(trained):
+    model, meta, _ = trained
+    planner, _ = _planner(model, meta, max_records=3)
+    for i in range(5):
+        planner.onset(_ns(10.0 * i))
+    assert [r['onset_stamp_ns'] for r in planner.interactions] == [_ns(20.0), _ns(30.0),
+                                                                   _ns(40.0)]
+
+
+def test_catch_up_drops_points_the_robot_cannot_reach_in_time(trained):
+    """A robot far from the plan gets a later first point, reachable at catch_up_velocity."""
+    from mixture_ip_ros.planning import build_plan
+    model, meta, demos = trained
+    est = OnlineEstimator(model, n_alpha=10, min_interval=0.0)
+    demo = demos[0]
+    for t, y in zip(demo.t[:40], demo.observed[:40]):
+        est.update(t, y)
+    t_now = demo.t[39]
+    free = build_plan(est, t_now, n_points=25)
+    speed = np.full(model.n_controlled_, 0.5)
+    far = free.positions[0] + 1.0                       # 1 rad away on every joint: 2 s at 0.5
+    plan = build_plan(est, t_now, n_points=25, robot_q=far, catch_up_velocity=speed)
+    reach = t_now + np.max(np.abs(plan.positions - far) / speed, axis=1)
+    assert plan.times[0] >= reach[0] - 1e-12
+    assert len(plan.times) < len(free.times)
+    assert np.all(np.diff(plan.times) > 0)
+    near = build_plan(est, t_now, n_points=25, robot_q=free.positions[0], catch_up_velocity=speed)
+    assert np.allclose(near.times, free.times)

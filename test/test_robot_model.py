@@ -1,0 +1,162 @@
+"""The iiwa 14 model: URDF facts, Pinocchio vs MuJoCo agreement, scene contents, IK."""
+
+import math
+
+import mujoco
+import numpy as np
+import pytest
+
+from mixture_ip_ros.robot.kinematics import JOINT_NAMES, IiwaKinematics
+from mixture_ip_ros.robot.scene import (ACTUATOR_NAMES, FLANGE_SITE, HUMAN_WRIST, TABLE_TOP_Z,
+                                        build_scene)
+from mixture_ip_ros.robot.sim import HOME
+
+
+@pytest.fixture(scope='module')
+def kin():
+    return IiwaKinematics()
+
+
+@pytest.fixture(scope='module')
+def scene():
+    return build_scene()
+
+
+def test_urdf_limits_are_the_data_sheet_values(kin):
+    deg = np.radians
+    assert kin.joint_names == [f'iiwa_joint_{i}' for i in range(1, 8)]
+    np.testing.assert_allclose(kin.upper, deg([170, 120, 170, 120, 170, 120, 175]), rtol=1e-12)
+    np.testing.assert_allclose(kin.lower, -kin.upper)
+    np.testing.assert_allclose(kin.velocity_limit, deg([85, 85, 100, 75, 130, 135, 135]),
+                               rtol=1e-12)
+    np.testing.assert_allclose(kin.effort_limit, [320, 320, 176, 176, 110, 40, 40])
+
+
+def test_stretched_arm_is_the_sum_of_the_link_offsets(kin):
+    p, R = kin.fk(np.zeros(7))
+    height = 0.1575 + 0.2025 + 0.2045 + 0.2155 + 0.1845 + 0.2155 + 0.081 + 0.045
+    np.testing.assert_allclose(p, [0, 0, height], atol=1e-12)
+    np.testing.assert_allclose(R, np.eye(3), atol=1e-12)
+    # Link masses as published (sum of the seven moving links).
+    masses = [kin.model.inertias[i].mass for i in range(1, 8)]
+    np.testing.assert_allclose(masses, [5.76, 6.35, 3.5, 3.5, 3.5, 1.8, 1.2])
+
+
+def test_pinocchio_and_mujoco_agree_at_100_random_configurations(kin, scene):
+    data = mujoco.MjData(scene)
+    site = scene.site(FLANGE_SITE).id
+    rng = np.random.default_rng(7)
+    M_mj = np.zeros((7, 7))
+    for _ in range(100):
+        q = rng.uniform(kin.lower, kin.upper)
+        qd = rng.normal(size=7)
+        data.qpos[:] = q
+        data.qvel[:] = qd
+        mujoco.mj_forward(scene, data)
+        mujoco.mj_fullM(scene, data, M_mj)
+        p, R = kin.fk(q)
+        np.testing.assert_allclose(p, data.site_xpos[site], atol=1e-6)
+        np.testing.assert_allclose(R, data.site_xmat[site].reshape(3, 3), atol=1e-6)
+        np.testing.assert_allclose(kin.mass_matrix(q), M_mj, atol=1e-6)
+        # Coriolis + gravity too: the controller relies on them.
+        np.testing.assert_allclose(kin.rnea(q, qd, np.zeros(7)), data.qfrc_bias, atol=1e-6)
+
+
+def test_perturbed_model_scales_mass_matrix_and_gravity(kin):
+    heavy = IiwaKinematics(mass_scale=1.1)
+    q = HOME
+    np.testing.assert_allclose(heavy.mass_matrix(q), 1.1 * kin.mass_matrix(q), rtol=1e-12,
+                               atol=1e-12)
+    np.testing.assert_allclose(heavy.gravity(q), 1.1 * kin.gravity(q), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(heavy.fk(q)[0], kin.fk(q)[0])
+    with pytest.raises(ValueError):
+        IiwaKinematics(mass_scale=0.0)
+
+
+def test_scene_actuators_table_pole_and_wrist(scene):
+    assert scene.opt.timestep == pytest.approx(0.001)
+    assert scene.nq == 7 and scene.nu == 7
+    assert [scene.actuator(i).name for i in range(7)] == ACTUATOR_NAMES
+    np.testing.assert_allclose(scene.actuator_ctrlrange[:, 1], [320, 320, 176, 176, 110, 40, 40])
+    np.testing.assert_allclose(scene.actuator_ctrlrange[:, 0], -scene.actuator_ctrlrange[:, 1])
+    np.testing.assert_allclose(scene.actuator_gainprm[:, 0], 1.0)   # ctrl is torque in Nm
+    np.testing.assert_allclose(scene.dof_damping, 0.0)
+    np.testing.assert_allclose(scene.dof_armature, 0.0)
+    for i, name in enumerate(JOINT_NAMES):
+        assert scene.joint(name).qposadr[0] == i
+    assert scene.body(HUMAN_WRIST).mocapid[0] == 0
+    assert scene.site(HUMAN_WRIST).id >= 0
+    data = mujoco.MjData(scene)
+    mujoco.mj_forward(scene, data)
+    top = scene.geom('table_top')
+    assert data.geom_xpos[top.id][2] + top.size[2] == pytest.approx(TABLE_TOP_Z)
+    assert 'pole' not in [scene.geom(i).name for i in range(scene.ngeom)]
+    with_pole = build_scene(pole=True, pole_xy=(0.6, 0.1), pole_height=0.5)
+    pole = with_pole.geom('pole')
+    np.testing.assert_allclose(pole.pos, [0.6, 0.1, 0.25])
+    for name in ('plate_stand', 'screw_stand'):
+        assert scene.geom(name).id >= 0
+    assert 'plate_stand' not in [build_scene(stands=False).geom(i).name
+                                 for i in range(build_scene(stands=False).ngeom)]
+
+
+def test_arm_collides_with_table_but_not_with_itself(scene):
+    data = mujoco.MjData(scene)
+    # Shoulder tilted forward 115 deg, elbow bent down: the forearm goes through the table top.
+    data.qpos[:] = [0.0, 2.0, 0.0, -1.0, 0.0, 0.0, 0.0]
+    mujoco.mj_forward(scene, data)
+    table = scene.geom('table_top').id
+    pairs = {(data.contact.geom1[i], data.contact.geom2[i]) for i in range(data.ncon)}
+    assert any(table in pair for pair in pairs)
+    robot_bodies = {scene.body(f'iiwa_link_{i}').id for i in range(8)}
+    for g1, g2 in pairs:
+        assert not {scene.geom_bodyid[g1], scene.geom_bodyid[g2]} <= robot_bodies
+
+
+def test_ik_reaches_handover_region(kin):
+    rng = np.random.default_rng(3)
+    for _ in range(60):
+        target = rng.uniform([0.4, -0.4, 0.1], [0.8, 0.4, 0.5])
+        q = kin.ik(target, HOME)
+        assert np.linalg.norm(kin.fk(q)[0] - target) < 1e-3
+        assert kin.within_limits(q)
+
+
+def test_ik_with_orientation_recovers_a_reachable_pose(kin):
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        q_true = rng.uniform(kin.lower * 0.7, kin.upper * 0.7)
+        p, R = kin.fk(q_true)
+        q = kin.ik(p, HOME, rotation=R, rotation_tol=1e-2)
+        p2, R2 = kin.fk(q)
+        assert np.linalg.norm(p2 - p) < 1e-3
+        angle = math.acos(np.clip((np.trace(R2.T @ R) - 1) / 2, -1, 1))
+        assert angle < 1e-2
+
+
+def test_ik_warm_start_gives_a_smooth_path(kin):
+    q = HOME
+    path = []
+    for s in np.linspace(0, 1, 101):
+        target = np.array([0.4 + 0.4 * s, -0.3 + 0.6 * s, 0.15 + 0.3 * s])
+        q = kin.ik(target, q)
+        path.append(q)
+    path = np.array(path)
+    # 101 targets 9 mm apart: each joint step stays a small multiple of the Cartesian step.
+    assert np.abs(np.diff(path[1:], axis=0)).max() < 0.05
+
+
+def test_ik_rejects_unreachable_and_bad_input(kin):
+    with pytest.raises(ValueError, match='did not converge'):
+        kin.ik([2.0, 0.0, 0.3], HOME, restarts=2)
+    with pytest.raises(ValueError):
+        kin.ik([np.nan, 0.0, 0.3], HOME)
+    with pytest.raises(ValueError):
+        kin.ik([0.5, 0.0, 0.3], np.zeros(6))
+
+
+def test_fk_positions_matches_fk(kin):
+    Q = np.random.default_rng(5).uniform(kin.lower, kin.upper, size=(10, 7))
+    P = kin.fk_positions(Q)
+    for q, p in zip(Q, P):
+        np.testing.assert_allclose(p, kin.fk(q)[0], atol=1e-12)

@@ -1,0 +1,253 @@
+"""Trajectory acceptance (JTC rules + finiteness) and interpolation, alone and in the sim."""
+
+import numpy as np
+import pytest
+
+from mixture_ip_ros.robot.kinematics import JOINT_NAMES
+from mixture_ip_ros.robot.sim import HOME, IiwaSimulation
+from mixture_ip_ros.robot.trajectory import (JointTrajectory, TrajectoryFollower, TrajectoryPoint,
+                                             points_from_arrays, validate_trajectory)
+
+J = list(JOINT_NAMES)
+
+
+def _points(n=3, dof=7, dt=0.5, vel=True):
+    return [TrajectoryPoint((i + 1) * dt, [0.1 * i] * dof, [0.0] * dof if vel else [])
+            for i in range(n)]
+
+
+def _validate(names=None, points=None, start=None, now=0.0, **kw):
+    return validate_trajectory(J if names is None else names,
+                               _points() if points is None else points, start, now, J, **kw)
+
+
+def test_a_good_trajectory_is_accepted():
+    result = _validate()
+    assert isinstance(result, JointTrajectory)
+    np.testing.assert_allclose(result.times, [0.5, 1.0, 1.5])
+    assert result.has_velocities.all() and not result.has_accelerations.any()
+
+
+def test_reject_empty_joint_names():
+    assert 'empty joint_names' in _validate(names=[])
+
+
+def test_reject_empty_points():
+    assert 'no points' in _validate(points=[])
+
+
+def test_reject_unknown_joint():
+    assert 'unknown joint' in _validate(names=J[:6] + ['elbow'])
+
+
+def test_reject_duplicate_joint():
+    assert 'duplicate' in _validate(names=J[:6] + [J[0]])
+
+
+def test_reject_wrong_joint_count():
+    assert 'partial goals are off' in _validate(names=J[:6], points=_points(dof=6))
+
+
+def test_partial_goal_when_allowed_fills_the_missing_joints():
+    fill = np.arange(7) * 0.1
+    result = _validate(names=[J[2], J[0]], points=[TrajectoryPoint(1.0, [5.0, 6.0])],
+                       allow_partial_joints_goal=True, fill_positions=fill)
+    np.testing.assert_allclose(result.positions[0], [6.0, 0.1, 5.0, 0.3, 0.4, 0.5, 0.6])
+
+
+def test_other_joint_order_is_remapped():
+    order = [6, 0, 5, 1, 4, 2, 3]
+    names = [J[i] for i in order]
+    values = np.array([10.0, 20, 30, 40, 50, 60, 70])
+    result = _validate(names=names, points=[TrajectoryPoint(1.0, values.tolist())])
+    expected = np.empty(7)
+    expected[order] = values
+    np.testing.assert_allclose(result.positions[0], expected)
+
+
+@pytest.mark.parametrize('field', ['positions', 'velocities', 'accelerations'])
+def test_reject_size_mismatch(field):
+    points = _points()
+    setattr(points[1], field, [0.0] * 6)
+    assert f'{field} has 6 values' in _validate(points=points)
+
+
+def test_reject_missing_positions():
+    points = _points()
+    points[2].positions = []
+    assert 'positions has 0 values' in _validate(points=points)
+
+
+@pytest.mark.parametrize('field,bad', [('positions', np.nan), ('velocities', np.inf),
+                                       ('accelerations', -np.inf)])
+def test_reject_non_finite_values(field, bad):
+    points = _points()
+    values = [0.0] * 7
+    values[3] = bad
+    setattr(points[1], field, values)
+    assert f'non-finite value in {field}' in _validate(points=points)
+
+
+@pytest.mark.parametrize('times', [[0.5, 0.5, 1.0], [0.5, 1.0, 0.9]])
+def test_reject_time_not_strictly_increasing(times):
+    points = _points()
+    for p, t in zip(points, times):
+        p.time_from_start = t
+    assert 'not strictly increasing' in _validate(points=points)
+
+
+def test_reject_trajectory_that_ends_in_the_past():
+    # Starts at t=10 and lasts 1.5 s: at now=12 it is over.
+    assert 'ends in the past' in _validate(start=10.0, now=12.0)
+    # Still running at now=11: accepted (sampled from now).
+    assert isinstance(_validate(start=10.0, now=11.0), JointTrajectory)
+    # No start time (header.stamp 0) is never in the past.
+    assert isinstance(_validate(start=None, now=1e6), JointTrajectory)
+
+
+def test_reject_nonzero_final_velocity_unless_allowed():
+    points = _points()
+    points[-1].velocities = [0.1] + [0.0] * 6
+    assert 'last point is not zero' in _validate(points=points)
+    assert isinstance(_validate(points=points, allow_nonzero_velocity_at_trajectory_end=True),
+                      JointTrajectory)
+
+
+# ---------------------------------------------------------------------- interpolation
+
+def _anchored(points, t=0.0, q=None, qd=None, start=None):
+    traj = validate_trajectory(J, points, start, t, J,
+                               allow_nonzero_velocity_at_trajectory_end=True)
+    assert isinstance(traj, JointTrajectory), traj
+    follower = TrajectoryFollower(7)
+    follower.set(traj)
+    q = np.zeros(7) if q is None else q
+    qd = np.zeros(7) if qd is None else qd
+    follower.sample(t, q, qd)
+    return follower
+
+
+def test_quintic_segment_matches_a_quintic_polynomial():
+    # A quintic sampled with exact derivatives must be reproduced everywhere.
+    coeffs = np.random.default_rng(0).normal(size=(6, 7))
+
+    def poly(t, d=0):
+        c = coeffs
+        if d == 0:
+            return sum(c[k] * t**k for k in range(6))
+        if d == 1:
+            return sum(k * c[k] * t**(k - 1) for k in range(1, 6))
+        return sum(k * (k - 1) * c[k] * t**(k - 2) for k in range(2, 6))
+    times = [0.0, 0.7, 1.3]
+    points = [TrajectoryPoint(t, poly(t).tolist(), poly(t, 1).tolist(), poly(t, 2).tolist())
+              for t in times]
+    follower = _anchored(points, q=poly(0.0), qd=poly(0.0, 1))
+    for t in np.linspace(0, 1.3, 27)[:-1]:
+        q, qd, qdd = follower.sample(t, None, None)
+        np.testing.assert_allclose(q, poly(t), atol=1e-9)
+        np.testing.assert_allclose(qd, poly(t, 1), atol=1e-8)
+        np.testing.assert_allclose(qdd, poly(t, 2), atol=1e-7)
+    np.testing.assert_allclose(follower.sample(1.3, None, None)[0], poly(1.3), atol=1e-9)
+
+
+def test_cubic_segment_hits_positions_and_velocities():
+    p0, p1 = np.zeros(7), np.arange(7.0)
+    v0, v1 = np.ones(7), -np.ones(7)
+    follower = _anchored([TrajectoryPoint(0.0, p0.tolist(), v0.tolist()),
+                          TrajectoryPoint(2.0, p1.tolist(), v1.tolist())])
+    q, qd, _ = follower.sample(0.0, None, None)
+    np.testing.assert_allclose(q, p0, atol=1e-12)
+    np.testing.assert_allclose(qd, v0, atol=1e-12)
+    q, qd, _ = follower.sample(2.0 - 1e-9, None, None)
+    np.testing.assert_allclose(q, p1, atol=1e-7)
+    np.testing.assert_allclose(qd, v1, atol=1e-7)
+    # The cubic's acceleration is linear in time: midpoint = mean of the ends.
+    a_start = follower.sample(0.0, None, None)[2]
+    a_end = follower.sample(2.0 - 1e-12, None, None)[2]
+    np.testing.assert_allclose(follower.sample(1.0, None, None)[2], (a_start + a_end) / 2,
+                               atol=1e-9)
+
+
+def test_position_only_is_linear_and_holds_the_last_point():
+    follower = _anchored([TrajectoryPoint(0.0, [0.0] * 7), TrajectoryPoint(2.0, [1.0] * 7)])
+    q, qd, qdd = follower.sample(0.5, None, None)
+    np.testing.assert_allclose(q, 0.25)
+    np.testing.assert_allclose(qd, 0.5)
+    np.testing.assert_allclose(qdd, 0.0)
+    for t in (2.0, 3.0, 100.0):
+        q, qd, qdd = follower.sample(t, None, None)
+        np.testing.assert_allclose(q, 1.0)
+        np.testing.assert_allclose(qd, 0.0)
+        np.testing.assert_allclose(qdd, 0.0)
+
+
+def test_first_point_in_the_future_is_reached_from_the_current_state():
+    q_now = np.full(7, 0.3)
+    qd_now = np.full(7, -0.2)
+    points = [TrajectoryPoint(1.0, [1.0] * 7, [0.0] * 7)]
+    follower = _anchored(points, t=5.0, q=q_now, qd=qd_now)
+    q, qd, _ = follower.sample(5.0, None, None)
+    np.testing.assert_allclose(q, q_now)
+    np.testing.assert_allclose(qd, qd_now)
+    np.testing.assert_allclose(follower.sample(6.0, None, None)[0], 1.0)
+
+
+def test_start_in_the_past_is_sampled_from_now():
+    # The trajectory started at t=10; at t=11 it is sampled 1 s in, not from its beginning.
+    points = [TrajectoryPoint(0.0, [0.0] * 7), TrajectoryPoint(2.0, [2.0] * 7)]
+    follower = _anchored(points, t=11.0, start=10.0, q=np.full(7, 5.0))
+    np.testing.assert_allclose(follower.sample(11.0, None, None)[0], 1.0)
+    np.testing.assert_allclose(follower.sample(11.5, None, None)[0], 1.5)
+
+
+def test_header_stamp_zero_starts_now():
+    points = [TrajectoryPoint(0.0, [0.0] * 7), TrajectoryPoint(2.0, [2.0] * 7)]
+    follower = _anchored(points, t=7.0, start=None)
+    np.testing.assert_allclose(follower.sample(7.5, None, None)[0], 0.5)
+
+
+# ---------------------------------------------------------------------- in the simulation
+
+def test_simulation_counts_and_logs_rejections():
+    logged = []
+    sim = IiwaSimulation(logger=logged.append)
+    assert sim.set_trajectory(J[:6], _points(dof=6)) is not None
+    assert sim.set_trajectory(J, []) is not None
+    bad = _points()
+    bad[0].positions = [np.nan] * 7
+    assert 'non-finite' in sim.set_trajectory(J, bad)
+    assert sim.rejection_count == 3
+    assert sum('trajectory rejected' in m for m in logged) == 3
+    assert 'non-finite' in logged[-1]
+    # A rejected trajectory changes nothing: the arm keeps holding.
+    sim.step(100)
+    np.testing.assert_allclose(sim.q, HOME, atol=1e-6)
+
+
+@pytest.mark.parametrize('open_loop', [False, True])
+def test_replacement_mid_trajectory_has_no_jump(open_loop):
+    sim = IiwaSimulation(open_loop_control=open_loop)
+    q_a = HOME + np.array([0.6, 0.3, -0.4, 0.5, 0.3, -0.3, 0.8])
+    t = np.linspace(0.0, 2.0, 11)
+    s = t / 2.0
+    shape = 10 * s**3 - 15 * s**4 + 6 * s**5
+    dshape = (30 * s**2 - 60 * s**3 + 30 * s**4) / 2.0
+    P = HOME + np.outer(shape, q_a - HOME)
+    V = np.outer(dshape, q_a - HOME)
+    assert sim.set_trajectory(J, points_from_arrays(t, P, V)) is None
+    refs = []
+    for k in range(2500):
+        if k == 1000:
+            # Mid-motion (fastest point): a new goal somewhere else, first point 0.5 s ahead.
+            q_b = HOME - 0.3
+            assert sim.set_trajectory(J, points_from_arrays([0.5, 1.5], [q_b, q_b],
+                                                            [np.zeros(7)] * 2)) is None
+        sim.step(1)
+        refs.append(sim.reference[0])
+    refs = np.array(refs)
+    steps = np.abs(np.diff(refs, axis=0)).max(axis=1)
+    # The largest per-step reference motion at the switch is no larger than elsewhere.
+    before = steps[900:998].max()
+    at_switch = steps[997:1003].max()
+    assert at_switch <= 1.05 * before
+    np.testing.assert_allclose(sim.q, HOME - 0.3, atol=1e-4)
