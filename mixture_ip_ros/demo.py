@@ -92,7 +92,6 @@ def run_demo(args):
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(report, indent=1) + '\n')
-    from mixture_ip_ros.plots import plot_demo
     plot_demo(records, out_dir)
     print(f'plots in {out_dir}')
     if args.render:
@@ -146,3 +145,42 @@ def render_all(records, render_dir: Path):
     for rec in records:
         paths = render_interaction(rec, render_dir)
         print(f'rendered {rec.name}: ' + ', '.join(str(p) for p in paths.values()))
+
+
+def plot_demo(records, out_dir: Path):
+    """Per interaction: wrist and robot hand paths (top view and height over time) and the
+    component posterior over time, with the onset, commit and end marked."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    for rec in records:
+        fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
+        t0 = rec.onset_time if rec.onset_time is not None else (rec.t[0] if len(rec.t) else 0.0)
+        if len(rec.wrist):
+            ax[0].plot(rec.wrist[:, 1], rec.wrist[:, 0], '.', ms=2, label='human wrist (observed)')
+            ax[1].plot(rec.wrist_t - t0, rec.wrist[:, 2], '.', ms=2, label='wrist z')
+        if len(rec.flange):
+            ax[0].plot(rec.flange[:, 1], rec.flange[:, 0], '-', label='robot hand (sim)')
+            ax[1].plot(rec.t - t0, rec.flange[:, 2], '-', label='robot hand z')
+        if rec.target is not None:
+            ax[0].plot(rec.target[1], rec.target[0], 'k*', ms=12, label='demonstrated target')
+        ax[0].set(xlabel='y (m)', ylabel='x (m)', title='top view, robot base frame')
+        ax[0].invert_xaxis()
+        ax[0].legend(fontsize=7)
+        ax[1].set(xlabel='time since onset (s)', ylabel='z (m)', title='height')
+        ax[1].legend(fontsize=7)
+        for k, label in enumerate(rec.component_labels):
+            if len(rec.posterior):
+                ax[2].plot(rec.posterior_t - t0, rec.posterior[:, k], label=f'p({label} | D)')
+        if len(rec.phase):
+            ax[2].plot(rec.posterior_t - t0, rec.phase, 'k--', label='phase z')
+        for a in ax[1:]:
+            for when, style in ((rec.commit_time, 'g:'), (rec.end_time, 'r:')):
+                if when is not None:
+                    a.axvline(when - t0, color=style[0], ls=':')
+        ax[2].set(xlabel='time since onset (s)', ylim=(-0.05, 1.05),
+                  title=f'true {rec.true_pattern}, chosen {rec.chosen_pattern}')
+        ax[2].legend(fontsize=7)
+        fig.tight_layout()
+        fig.savefig(out_dir / f'{rec.name}.png', dpi=90)
+        plt.close(fig)

@@ -109,7 +109,8 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
         times = phases / a
     m = n_points if n_wrist_points is None else int(n_wrist_points)
     wrist_phases = np.linspace(0.0, 1.0, m)
-    pred = estimator.predict(np.concatenate([phases, wrist_phases]), component=k, alpha=a)
+    pred = estimator.predict(np.concatenate([phases, wrist_phases]), component=k, alpha=a,
+                             covariance=False)
     a = pred['alpha']   # the grid value actually used (identical when a came from the grid)
     n = len(phases)
     ctrl = pred['controlled']

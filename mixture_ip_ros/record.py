@@ -11,7 +11,8 @@ class InteractionRecord:
     """Time series of one replayed interaction, all in the robot base frame, times in seconds
     of simulated time.
 
-    ``t``/``q``: robot joint positions (n, 7) sampled from /joint_states; ``flange`` (n, 3);
+    ``t``/``q``: robot joint positions (n, 7) sampled from /joint_states; ``flange`` (n, 3) the
+    robot hand (tool0) position at the same times;
     ``wrist_t``/``wrist``: the human wrist as the observer published it (m, 3);
     ``posterior_t``/``posterior``: p(k | D) (r, K), ``phase`` (r,) and ``alpha`` (r,) as the
     estimator published them. Event times may be None when the event did not happen.

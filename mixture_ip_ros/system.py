@@ -105,7 +105,7 @@ class ClosedLoop:
     def _record(self, name, true_pattern, target, start) -> InteractionRecord:
         snap = self.recorder.snapshot()
         joints = [(t, q) for t, q in snap['joints'] if t >= start]
-        flange = [(t, p) for t, p in snap['flange'] if t >= start]
+        q = np.array([q for _, q in joints]).reshape(-1, 7)
         inter = self.estimator.interactions[-1] if self.estimator.interactions else {}
         K = len(self.labels)
         post = np.array([d for _, d in snap['posterior']]) if snap['posterior'] else np.zeros(
@@ -116,8 +116,8 @@ class ClosedLoop:
         commit_phase = inter.get('commit_phase')
         return InteractionRecord(
             name=name, true_pattern=true_pattern, component_labels=list(self.labels),
-            t=np.array([t for t, _ in joints]), q=np.array([q for _, q in joints]),
-            flange=np.array([p for _, p in flange]),
+            t=np.array([t for t, _ in joints]), q=q,
+            flange=self.kinematics.fk_positions(q) if len(q) else np.zeros((0, 3)),
             wrist_t=np.array([t for t, _ in snap['wrist']]),
             wrist=np.array([p for _, p in snap['wrist']]).reshape(-1, 3),
             posterior_t=np.array([t for t, _ in snap['posterior']]),

@@ -33,7 +33,7 @@ HELD_OUT = (0, 13, 30)
 ONSET_NS = 1_000_000_000_000          # observation stamps: onset + t
 FRAME = 'iiwa_link_0'
 # Timers that never fire during a test: replans and diagnostics are driven by hand.
-MANUAL = {'replan_rate_hz': 1e-3, 'diagnostics_period': 1e3}
+MANUAL = {'replan_rate_hz': 1e-3, 'diagnostics_period': 1e3, 'replan_on_observation': False}
 
 
 @pytest.fixture(scope='module')
@@ -298,7 +298,8 @@ def test_bad_input_is_counted_and_the_node_keeps_working(harness, trained):
 def test_replanning_runs_on_the_node_clock_with_sim_time(harness, trained):
     _, held = trained
     demo = held[1]
-    h = harness(use_sim_time=True, replan_rate_hz=10.0, diagnostics_period=1e3)
+    h = harness(use_sim_time=True, replan_rate_hz=10.0, diagnostics_period=1e3,
+                replan_on_observation=False)
     clock_pub = h.peer.create_publisher(Clock, '/clock', 10)
     h.spin_until(lambda: clock_pub.get_subscription_count() > 0, what='/clock discovery')
     h.event('onset', ONSET_NS)
@@ -381,3 +382,18 @@ def test_config_file_declares_the_defaults(ros_context, trained):
     for name, value in expected.items():
         for got in (from_file[name], defaults[name]):
             assert (list(got) if isinstance(value, list) else got) == value, name
+
+
+def test_observations_trigger_replans_at_the_configured_rate(harness, trained):
+    """With replan_on_observation, a used observation replans at once, at most every
+    1/replan_rate_hz on the stamps' clock (the wall-clock timer may add a few more)."""
+    _, held = trained
+    demo = held[2]
+    h = harness(replan_rate_hz=5.0, diagnostics_period=1e3)
+    h.event('onset', ONSET_NS)
+    n = int(np.searchsorted(demo.t, 0.6 * demo.duration))
+    h.feed(demo, list(range(n)))
+    h.spin_until(lambda: len(h.got['posterior']) >= int(demo.t[n - 1] / 0.2), what='replans')
+    assert h.got['trajectory'], 'no trajectory from observation-triggered replans'
+    timer_ticks = 5 * 4    # generous: the feed and spin take well under 4 s of wall time
+    assert len(h.got['posterior']) <= int(demo.t[n - 1] / 0.2) + 2 + timer_ticks

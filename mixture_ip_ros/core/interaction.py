@@ -65,7 +65,8 @@ def trajectory_distribution(mean, cov, basis: GaussianBasis, z, alpha: float = 1
     Positions at phases ``z``; velocities and accelerations are time derivatives for the phase
     speed ``alpha`` = 1/T (z = alpha t). Returns a dict with 'position', 'velocity',
     'acceleration' of shape (len(z), n) and 'position_cov' (len(z), n, n) (joint covariance
-    between the selected DOFs at each phase).
+    between the selected DOFs at each phase), or without 'position_cov' when ``cov`` is None
+    (a robot command needs only the mean).
     """
     N = basis.n_basis
     n_dofs = mean.shape[0] // N
@@ -77,6 +78,8 @@ def trajectory_distribution(mean, cov, basis: GaussianBasis, z, alpha: float = 1
         'velocity': alpha * (dpsi @ W.T),
         'acceleration': alpha ** 2 * (ddpsi @ W.T),
     }
+    if cov is None:
+        return out
     idx = np.concatenate([np.arange(j * N, (j + 1) * N) for j in dofs])
     C = cov[np.ix_(idx, idx)].reshape(len(dofs), N, len(dofs), N)
     out['position_cov'] = np.einsum('tn,injk,tk->tij', psi, C, psi, optimize=True)

@@ -123,12 +123,12 @@ class OnlineEstimator:
         h = k * len(self.alphas) + m
         return self.mu[h], self.sigma[h]
 
-    def predict(self, z_grid, component=None, alpha=None):
+    def predict(self, z_grid, component=None, alpha=None, covariance: bool = True):
         """Conditioned trajectories under (k*, alpha*) (or the given ones) at phases ``z_grid``.
 
         Returns a dict: 'time' (s since onset = z / alpha), 'component', 'alpha', 'controlled'
         and 'observed', each a dict of 'position', 'velocity', 'acceleration' (len, n) and
-        'position_cov' (len, n, n).
+        'position_cov' (len, n, n) (omitted with ``covariance=False``).
         """
         k_map, a_map = self.map_hypothesis()
         k = k_map if component is None else int(component)
@@ -142,10 +142,13 @@ class OnlineEstimator:
         prior_mean = self.model.means_[k]
         B = self._gain[k]
         mean_c = prior_mean[do:] + B @ (mu_o - prior_mean[:do])
-        cov_c = self._cond_cov[k] + B @ sig_o @ B.T
+        cov_c = None
+        if covariance:
+            cov_c = self._cond_cov[k] + B @ sig_o @ B.T
+            cov_c = 0.5 * (cov_c + cov_c.T)
         z_grid = np.asarray(z_grid, dtype=float)
-        ctrl = trajectory_distribution(mean_c, 0.5 * (cov_c + cov_c.T), self.model.basis_,
-                                       z_grid, a)
-        obs = trajectory_distribution(mu_o, sig_o, self.model.basis_, z_grid, a)
+        ctrl = trajectory_distribution(mean_c, cov_c, self.model.basis_, z_grid, a)
+        obs = trajectory_distribution(mu_o, sig_o if covariance else None, self.model.basis_,
+                                      z_grid, a)
         return {'time': z_grid / a, 'component': k, 'alpha': a, 'controlled': ctrl,
                 'observed': obs}

@@ -8,7 +8,10 @@ Publishes   /iiwa/joint_trajectory     trajectory_msgs/JointTrajectory, reliable
                 points from the current phase (plus lookahead) to z = 1 with positions,
                 velocities, accelerations, time_from_start = z / alpha* (planning.build_plan).
                 Sent once p(k* | D) >= confidence_threshold with >= min_observations used,
-                then at replan_rate_hz while new observations arrive, and a last time on 'end'.
+                then at replan_rate_hz while new observations arrive (replanned in the
+                callback of the first observation used after each period, so the robot
+                reacts within one observation's latency; a timer covers pauses), and a
+                last time on 'end'.
             /estimator/predicted_wrist nav_msgs/Path (frame observed_frame): the whole
                 predicted wrist movement, phases 0..1, pose stamps = onset + z / alpha*.
             /estimator/posterior       std_msgs/Float64MultiArray, one dimension labelled
@@ -89,6 +92,7 @@ class EstimatorNode(Node):
         self.declare_parameter('confidence_threshold', 0.9)
         self.declare_parameter('min_observations', 3)
         self.declare_parameter('replan_rate_hz', 10.0)
+        self.declare_parameter('replan_on_observation', True)
         self.declare_parameter('n_points', 25)
         self.declare_parameter('lookahead', 0.1)
         self.declare_parameter('settle_time', 0.5)
@@ -137,6 +141,9 @@ class EstimatorNode(Node):
             labels=meta.get('component_labels'), pending_limit=int(param('input_queue_depth')),
             catch_up_velocity=self._catch_up_velocity(param('catch_up_velocity')))
         self._throttle = float(param('log_throttle_sec'))
+        self._replan_period = 1.0 / float(param('replan_rate_hz'))
+        self._replan_on_observation = bool(param('replan_on_observation'))
+        self._next_replan = None   # stamp-clock time (s since onset) of the next replan
         self.latency = LatencyStats()         # OnlineEstimator update, per used observation
         self.plan_latency = LatencyStats()    # one replan: posterior, plan, messages, publish
         self.events = {'onset': 0, 'end': 0, 'gap': 0, 'unknown': 0}
@@ -219,6 +226,13 @@ class EstimatorNode(Node):
             result = self.planner.observe(_stamp_ns(msg.header.stamp), (p.x, p.y, p.z))
             if result == 'used':
                 self.latency.add(time.perf_counter() - t0)
+                # Replan right away (at most at replan_rate_hz on the stamps' clock): the
+                # robot reacts within the observation's latency, not a timer period.
+                t = self.planner.t_now
+                if self._replan_on_observation and (self._next_replan is None
+                                                    or t >= self._next_replan):
+                    self._next_replan = t + self._replan_period
+                    self.replan()
             elif result not in ('skipped', 'held'):
                 self._warn_rejected(result, f'stamp {msg.header.stamp.sec}.'
                                             f'{msg.header.stamp.nanosec:09d}')
@@ -233,6 +247,7 @@ class EstimatorNode(Node):
             stamp_ns = _stamp_ns(msg.stamp)
             if kind == 'onset':
                 self.events['onset'] += 1
+                self._next_replan = None
                 if self.planner.active:
                     self._log_unfinished()
                 for reason in self.planner.onset(stamp_ns):

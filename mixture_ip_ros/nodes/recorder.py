@@ -8,7 +8,7 @@ import math
 import threading
 
 import numpy as np
-from geometry_msgs.msg import PointStamped, PoseStamped
+from geometry_msgs.msg import PointStamped
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
@@ -25,7 +25,6 @@ class InteractionRecorder(Node):
     def __init__(self, **kwargs):
         super().__init__('recorder', **kwargs)
         self.declare_parameter('joint_state_topic', '/joint_states')
-        self.declare_parameter('flange_topic', '/iiwa/flange_pose')
         self.declare_parameter('observation_topic', '/observer/wrist')
         self.declare_parameter('event_topic', '/observer/event')
         self.declare_parameter('posterior_topic', '/estimator/posterior')
@@ -35,7 +34,6 @@ class InteractionRecorder(Node):
         self._lock = threading.Lock()
         self.clear()
         self.create_subscription(JointState, p('joint_state_topic').value, self._on_joints, qos)
-        self.create_subscription(PoseStamped, p('flange_topic').value, self._on_flange, qos)
         self.create_subscription(PointStamped, p('observation_topic').value, self._on_wrist, qos)
         self.create_subscription(Header, p('event_topic').value, self._on_event, qos)
         self.create_subscription(Float64MultiArray, p('posterior_topic').value,
@@ -45,7 +43,7 @@ class InteractionRecorder(Node):
 
     def clear(self):
         with self._lock:
-            self.joints, self.flange, self.wrist = [], [], []
+            self.joints, self.wrist = [], []
             self.events, self.posterior, self.trajectories = [], [], []
             self.non_finite_commands = 0
 
@@ -53,7 +51,7 @@ class InteractionRecorder(Node):
         """Copies of everything recorded so far."""
         with self._lock:
             return {k: list(getattr(self, k)) for k in
-                    ('joints', 'flange', 'wrist', 'events', 'posterior', 'trajectories')}
+                    ('joints', 'wrist', 'events', 'posterior', 'trajectories')}
 
     def latest_time(self) -> float:
         with self._lock:
@@ -62,11 +60,6 @@ class InteractionRecorder(Node):
     def _on_joints(self, msg):
         with self._lock:
             self.joints.append((_sec(msg.header.stamp), np.array(msg.position)))
-
-    def _on_flange(self, msg):
-        p = msg.pose.position
-        with self._lock:
-            self.flange.append((_sec(msg.header.stamp), np.array([p.x, p.y, p.z])))
 
     def _on_wrist(self, msg):
         p = msg.point

@@ -81,6 +81,7 @@ def build_spec(pole: bool = False, stands: bool = True, table: bool = True,
     if pole and not (pole_radius > 0 and pole_height > 0):
         raise ValueError('pole_radius and pole_height must be positive')
     spec = mujoco.MjSpec.from_file(str(path))
+    spec.compiler.discardvisual = False   # keep the visual-only geoms (floor, legs, objects)
     # Keep tool0 (massless, fixed) as its own body so the flange site has a home.
     spec.compiler.fusestatic = False
     spec.modelname = 'iiwa14_scene'
