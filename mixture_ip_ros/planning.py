@@ -80,7 +80,7 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
                settle_time: float = 0.5, n_wrist_points: Optional[int] = None,
                component: Optional[int] = None, alpha: Optional[float] = None,
                final_time: Optional[float] = None, robot_q=None,
-               catch_up_velocity=None) -> Plan:
+               catch_up_velocity=None, final_position=None) -> Plan:
     """The plan from ``t_now`` (s since onset) on, for (component, alpha) (default: the MAP).
 
     ``final_time``: when the human is at rest, the time of the final point if it is at least
@@ -89,6 +89,9 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
     use to catch up with the plan. Points it cannot reach in time at those speeds are dropped
     (the controller blends from its state into the first kept point); if none is reachable the
     plan is the last point, timed when it can be reached. Without them, no catch-up limit.
+    ``final_position``: the human's movement has ended here (the observer's 'end'): the plan is
+    the single final posture conditioned on this final position at z = 1
+    (``OnlineEstimator.predict_at_rest``).
     """
     if n_points < 2:
         raise ValueError(f'n_points must be >= 2, got {n_points}')
@@ -98,7 +101,7 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
     k = k_map if component is None else int(component)
     a = a_map if alpha is None else float(alpha)
     z_start = a * (t_now + lookahead)
-    final = z_start >= 1.0 - PHASE_EPS
+    final = final_position is not None or z_start >= 1.0 - PHASE_EPS
     if final:
         phases = np.array([1.0])
         if final_time is None or not final_time >= t_now + lookahead:
@@ -119,6 +122,8 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
     vel[-1] = 0.0
     acc[-1] = 0.0
     pos = ctrl['position'][:n].copy()
+    if final_position is not None:
+        pos[-1] = estimator.predict_at_rest(final_position, component=k)[0]
     if robot_q is not None and catch_up_velocity is not None:
         reachable_at = t_now + np.max(np.abs(pos - np.asarray(robot_q))
                                       / np.asarray(catch_up_velocity), axis=1)
@@ -245,6 +250,7 @@ class InteractionPlanner:
         self._max_records = max(1, int(max_records))
         self._onset_ns = None
         self._t_latest = None     # latest observation time (s since onset), used or skipped
+        self._y_latest = None     # and the observed position then
         self._dirty = False       # something new since the last step
         self._sent_component = None
         self._final_time = None   # time of the last final (at rest) plan's point
@@ -297,6 +303,7 @@ class InteractionPlanner:
         self.estimator.reset()
         self._onset_ns = int(stamp_ns)
         self._t_latest = None
+        self._y_latest = None
         self._dirty = True
         self._sent_component = None
         self._final_time = None
@@ -353,6 +360,7 @@ class InteractionPlanner:
         except ValueError:
             return self._rejected_in_interaction('exception')
         self._t_latest = t
+        self._y_latest = y
         self._dirty = True
         if used:
             self.used += 1
@@ -384,7 +392,8 @@ class InteractionPlanner:
         plan = build_plan(est, t_now, n_points=self.n_points, lookahead=self.lookahead,
                           settle_time=self.settle_time, component=k, alpha=alpha,
                           final_time=self._final_time, robot_q=self.robot_q,
-                          catch_up_velocity=self.catch_up_velocity)
+                          catch_up_velocity=self.catch_up_velocity,
+                          final_position=self._y_latest if final else None)
         problem = check_plan(plan)
         if problem is not None:
             self.plan_failures += 1

@@ -51,6 +51,7 @@ class ClosedLoop:
         self._home_pub = self.recorder.create_publisher(JointTrajectory, '/iiwa/joint_trajectory',
                                                         10)
         self.kinematics = IiwaKinematics()
+        self.wrist_topic = self.observer.get_parameter('wrist_topic').value
         self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
         for node in (self.sim, self.observer, self.estimator, self.recorder):
             self.executor.add_node(node)
@@ -86,12 +87,14 @@ class ClosedLoop:
     # ------------------------------------------------------------------ one interaction
     def run_interaction(self, bag, *, true_pattern=None, target=None, settle=1.5,
                         extra_params=None, timeout=120.0) -> InteractionRecord:
-        """Replay ``bag`` through the loop; returns what happened."""
+        """Replay the human's wrist stream of ``bag`` through the loop (the recorded robot joints
+        are training data and stay in the bag); returns what happened."""
         self.recorder.clear()
         start = self.now()
         player = BagPlayer(context=self.context, parameter_overrides=[
             Parameter('use_sim_time', value=True)] + _params(
-            {'bag': str(bag), 'rewrite_stamps': True, **(extra_params or {})}))
+            {'bag': str(bag), 'rewrite_stamps': True, 'topics': [self.wrist_topic],
+             **(extra_params or {})}))
         self.executor.add_node(player)
         try:
             if not player.wait_until_finished(timeout):

@@ -138,3 +138,20 @@ def test_alpha_map_within_ten_percent_after_forty_percent_observed():
 def test_alpha_prior_from_durations():
     mean, std = alpha_prior_from_durations([1.0, 2.0])
     assert mean == pytest.approx(0.75) and std == pytest.approx(0.25)
+
+
+def test_final_posture_conditions_on_the_final_position_at_phase_one(model_and_demos):
+    """predict_at_rest is eq. 13 with D = final wrist position at z = 1: dense check."""
+    model, demos, _ = model_and_demos
+    est = OnlineEstimator(model, n_alpha=5)
+    y = demos[7].observed[-1]
+    k = 1
+    mean, cov = est.predict_at_rest(y, component=k)
+    N, P = model.n_basis, model.n_observed_
+    D = P + model.n_controlled_
+    A = np.kron(np.eye(D), model.basis_([1.0]))             # every DOF at z = 1
+    mu, C = A @ model.means_[k], A @ model.covariances_[k] @ A.T
+    S = C[:P, :P] + np.diag(model.observed_noise_var_)
+    gain = C[P:, :P] @ np.linalg.inv(S)
+    assert np.allclose(mean, mu[P:] + gain @ (y - mu[:P]), atol=1e-9)
+    assert np.allclose(cov, C[P:, P:] - gain @ C[:P, P:], atol=1e-9)

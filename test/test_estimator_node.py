@@ -212,7 +212,7 @@ def test_interaction_commits_then_replans_and_ends_with_a_final_plan(harness, tr
     oracle = _oracle(model_path, demo, [0, 5] + idx + rest)
     k, alpha = oracle.map_hypothesis()
     assert np.allclose(final.points[-1].positions,
-                       oracle.predict([1.0])['controlled']['position'][0], atol=1e-12)
+                       oracle.predict_at_rest(demo.observed[-1])[0], atol=1e-12)
     # the held-out demonstration's own final posture (independent of the estimator)
     assert np.abs(np.array(final.points[-1].positions) - demo.controlled[-1]).max() < 0.1
     assert not np.any(final.points[-1].velocities)

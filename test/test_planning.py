@@ -212,8 +212,10 @@ def test_interaction_commits_when_the_oracle_passes_the_threshold(request, which
     assert rec['end_time'] == pytest.approx((onset + _ns(demo.t[-1])) * 1e-9, abs=1e-6)
     assert (rec['final_component'], rec['final_label']) == (oracle.map_hypothesis()[0],
                                                             demo.label)
+    # the end posture: eq. 13 conditioned on the final wrist position at z = 1
     assert np.allclose(final.plan.positions[-1],
-                       oracle.predict([1.0])['controlled']['position'][0], atol=1e-12)
+                       oracle.predict_at_rest(demo.observed[-1])[0], atol=1e-12)
+    assert len(final.plan.times) == 1
     assert planner.step() is None                     # nothing after the end
 
 

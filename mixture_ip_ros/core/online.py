@@ -152,3 +152,19 @@ class OnlineEstimator:
                                       z_grid, a)
         return {'time': z_grid / a, 'component': k, 'alpha': a, 'controlled': ctrl,
                 'observed': obs}
+
+    def predict_at_rest(self, y_final, component=None):
+        """The controlled agent's final posture once the movement has ended: eq. 13 with D the
+        final position of the observed agent at z = 1 (phase known), as in the thesis's
+        experiments. Returns the posture mean (Q,) and covariance (Q, Q).
+
+        Conditioning the end posture on the final position only, rather than on the whole
+        observed path, avoids regressing it on path-shape details that a component learned
+        from a dozen demonstrations cannot estimate (spurious correlations of a 45-dimensional
+        weight vector)."""
+        k = self.map_hypothesis()[0] if component is None else int(component)
+        _, mean, cov = self.model.condition([1.0], np.asarray(y_final, dtype=float)[None],
+                                            component=k)
+        dofs = range(self.n_observed, self.n_observed + self.model.n_controlled_)
+        out = trajectory_distribution(mean, cov, self.model.basis_, [1.0], 1.0, dofs)
+        return out['position'][0], out['position_cov'][0]

@@ -1,0 +1,229 @@
+"""The closed loop with the real nodes: bags -> observer -> estimator -> MuJoCo iiwa.
+
+In-process (one executor, private domain), cross-process (the executables, as a user starts
+them), and bad input into the running system.
+"""
+
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import private_domain_id
+from mixture_ip_ros.data.scenarios import read_labels, write_scenario_bags
+
+pytestmark = pytest.mark.filterwarnings('ignore::DeprecationWarning')
+
+
+@pytest.fixture(scope='module')
+def setup(tmp_path_factory):
+    """48 box-assembly bags; a model trained (K = 3) on all but one interaction per pattern."""
+    from mixture_ip_ros.data.dataset import load_demonstration
+    from mixture_ip_ros.demo import demonstrated_target, split_held_out
+    from mixture_ip_ros.robot.kinematics import IiwaKinematics
+    from mixture_ip_ros.training import train_to_file
+    root = tmp_path_factory.mktemp('closed_loop')
+    data = root / 'bags'
+    write_scenario_bags('box_assembly', data, seed=3)
+    labels = read_labels(data)
+    train, held = split_held_out(labels, 1, seed=3)
+    model = root / 'model.npz'
+    train_to_file([load_demonstration(data / n) for n in train], model, n_components=3)
+    kin = IiwaKinematics()
+    targets = {n: demonstrated_target(data / n, kin)[0] for n in held}
+    return {'data': data, 'labels': labels, 'held': held, 'model': model, 'targets': targets}
+
+
+@pytest.fixture(scope='module')
+def loop(setup):
+    from mixture_ip_ros.system import ClosedLoop
+    system = ClosedLoop(setup['model'], domain_id=private_domain_id())
+    yield system
+    system.close()
+
+
+def _run(loop, setup, name):
+    loop.go_home()
+    return loop.run_interaction(setup['data'] / name, true_pattern=setup['labels'][name],
+                                target=setup['targets'][name])
+
+
+def test_three_held_out_interactions_in_process(loop, setup):
+    records = [_run(loop, setup, name) for name in setup['held']]
+    assert sorted(r.true_pattern for r in records) == ['plate', 'screw', 'screwdriver']
+    for r in records:
+        assert r.chosen_pattern == r.true_pattern, r.name
+        assert r.commit_fraction is not None and 0 < r.commit_fraction < 1
+        assert np.linalg.norm(r.flange[-1] - r.target) < 0.03, r.name
+        assert r.extra['non_finite_commands'] == 0
+        assert r.extra['sim_rejections'] == 0
+    # Deterministic on simulated time: the same interaction again ends at the same place.
+    again = _run(loop, setup, records[0].name)
+    assert again.chosen_pattern == records[0].chosen_pattern
+    assert np.linalg.norm(again.flange[-1] - records[0].flange[-1]) < 2e-3
+    assert again.commit_fraction == pytest.approx(records[0].commit_fraction, abs=0.05)
+
+
+def test_bad_input_does_not_break_the_running_system(loop, setup):
+    """NaN poses, wrong frame, stamps going back, a 10x burst, a 0.5 s gap, and a flood of
+    invalid trajectories: no crash, no non-finite command, and the next interaction works."""
+    from builtin_interfaces.msg import Time
+    from geometry_msgs.msg import PoseStamped
+    from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+    node = loop.recorder
+    raw_pub = node.create_publisher(PoseStamped, '/mocap/wrist', qos_profile_sensor_data)
+
+    class pose_pub:  # a mocap driver's pace: one message per ms at most (best effort, depth 5)
+        @staticmethod
+        def publish(msg):
+            raw_pub.publish(msg)
+            time.sleep(0.001)
+    traj_pub = node.create_publisher(JointTrajectory, '/iiwa/joint_trajectory',
+                                     QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+    rejected_before = loop.sim.rejection_count
+    accepted_before = loop.sim.sim.accepted_count
+    drops_before = dict(loop.observer.drop_counts)
+
+    def pose(t, xyz, frame='world', q=(0.0, 0.0, 0.0, 1.0)):
+        msg = PoseStamped()
+        ns = int(round(t * 1e9))
+        msg.header.stamp = Time(sec=ns // 10**9, nanosec=ns % 10**9)
+        msg.header.frame_id = frame
+        msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = xyz
+        (msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z,
+         msg.pose.orientation.w) = q
+        return msg
+    t = loop.now() + 0.05
+    rest = (1.2, 0.25, 0.08)
+    for i in range(20):                                   # a valid stream at rest, 100 Hz
+        pose_pub.publish(pose(t + 0.01 * i, rest))
+    t += 0.2
+    pose_pub.publish(pose(t, (math.nan, 0.2, 0.1)))
+    pose_pub.publish(pose(t + 0.01, rest, frame='camera'))
+    pose_pub.publish(pose(t + 0.02, rest, q=(0.0, 0.0, 0.5, 0.5)))
+    pose_pub.publish(pose(t - 1.0, rest))                 # stamp going backwards
+    for i in range(200):                                  # 10x burst (1 kHz) at rest
+        pose_pub.publish(pose(t + 0.03 + 0.001 * i, rest))
+    loop.wait_sim(0.6)                                    # a 0.5 s gap in the stream
+    bad = []
+    for kind in range(6):
+        msg = JointTrajectory()
+        msg.joint_names = [f'iiwa_joint_{i}' for i in range(1, 8)]
+        p = JointTrajectoryPoint(positions=[0.0] * 7)
+        p.time_from_start.sec = 1
+        if kind == 0:
+            p.positions = [math.nan] + [0.0] * 6
+        elif kind == 1:
+            p.positions = [math.inf] * 7
+        elif kind == 2:
+            msg.joint_names = ['elbow'] * 7
+        elif kind == 3:
+            p.positions = [0.0] * 3
+        elif kind == 4:
+            msg.points = []
+        elif kind == 5:
+            p.velocities = [math.nan] * 7
+        if kind != 4:
+            msg.points = [p]
+        bad.append(msg)
+    for _ in range(20):
+        for msg in bad:
+            traj_pub.publish(msg)
+    loop.wait_sim(0.5)
+    # KEEP_LAST 10 on the command topic: a flood of 120 loses most on the way; every invalid
+    # one that arrives is rejected, none is accepted
+    assert loop.sim.rejection_count - rejected_before >= 10
+    assert loop.sim.sim.accepted_count == accepted_before
+    assert np.all(np.isfinite(loop.sim.sim.tau)) and np.all(np.isfinite(loop.sim.sim.q))
+    drops = {k: loop.observer.drop_counts[k] - drops_before.get(k, 0)
+             for k in loop.observer.drop_counts}
+    assert drops['non_finite'] >= 1 and drops['wrong_frame'] >= 1
+    assert drops['bad_quaternion'] >= 1 and drops['stamp_backwards'] >= 1
+    node.destroy_publisher(raw_pub)
+    node.destroy_publisher(traj_pub)
+    # The next valid interaction still works.
+    name = setup['held'][1]
+    r = _run(loop, setup, name)
+    assert r.chosen_pattern == r.true_pattern
+    assert np.linalg.norm(r.flange[-1] - r.target) < 0.03
+    assert r.extra['non_finite_commands'] == 0
+
+
+def test_cross_process_one_interaction(setup, tmp_path):
+    """The executables as separate processes (as `ros2 run` would start them)."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+    domain = private_domain_id() + 100
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), OPENBLAS_NUM_THREADS='1',
+               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    bindir = Path(sys.executable).parent
+    name = setup['held'][2]
+    cfg = Path(__file__).resolve().parents[1] / 'config'
+    configs = {'sim_node': 'sim.yaml', 'observer_node': 'observer.yaml',
+               'estimator_node': 'estimator.yaml', 'bag_player': 'bag_player.yaml'}
+    procs = []
+
+    def start(exe, *params):
+        args = [str(bindir / exe), '--ros-args', '--params-file', str(cfg / configs[exe])]
+        for p in params:
+            args += ['-p', p]
+        procs.append(subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL,
+                                      stderr=open(tmp_path / f'{exe}.log', 'w')))
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    node = rclpy.create_node('cross_process_test', context=ctx)
+    joints, posterior = [], []
+    node.create_subscription(JointState, '/joint_states', lambda m: joints.append(m), 10)
+    node.create_subscription(Float64MultiArray, '/estimator/posterior',
+                             lambda m: posterior.append(list(m.data)), 10)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+
+    def spin_until(cond, timeout):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end and not cond():
+            ex.spin_once(timeout_sec=0.05)
+        return cond()
+    try:
+        start('sim_node', 'real_time_factor:=1.0')
+        start('observer_node', 'use_sim_time:=true')
+        start('estimator_node', 'use_sim_time:=true', f'model_path:={setup["model"]}')
+        assert spin_until(lambda: len(joints) > 10, 30), 'no joint states from sim_node'
+        # wait until the estimator is up (its subscription to the observer is matched)
+        assert spin_until(lambda: node.count_subscribers('/observer/wrist') >= 1
+                          and node.count_publishers('/iiwa/joint_trajectory') >= 1, 30)
+        start('bag_player', 'use_sim_time:=true', 'rewrite_stamps:=true',
+              "topics:=['/mocap/wrist']", 'start_delay:=2.0',   # cross-process discovery
+              f'bag:={setup["data"] / name}')
+        assert spin_until(lambda: procs[-1].poll() is not None, 60), 'bag_player did not finish'
+        n = len(joints)
+        spin_until(lambda: len(joints) > n + 150, 20)     # 1.5 s of simulated settling
+        q = dict(zip(joints[-1].name, joints[-1].position))
+        q = np.array([q[f'iiwa_joint_{i}'] for i in range(1, 8)])
+        from mixture_ip_ros.robot.kinematics import IiwaKinematics
+        hand = IiwaKinematics().fk(q)[0]
+        assert posterior, 'no posterior from estimator_node'
+        assert np.linalg.norm(hand - setup['targets'][name]) < 0.03
+        for p in procs[:3]:
+            assert p.poll() is None, 'a node died'
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.send_signal(2)
+        for p in procs:
+            try:
+                p.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
