@@ -32,7 +32,8 @@ def _train(args):
 
 def _evaluate(args):
     from mixture_ip_ros.evaluation import evaluate
-    metrics = evaluate(args.scenario, Path(args.out), seed=args.seed, quick=args.quick)
+    metrics = evaluate(args.scenario, Path(args.out), seed=args.seed, quick=args.quick,
+                       bag_dir=args.bags)
     print(json.dumps(metrics, indent=1))
 
 
@@ -72,6 +73,8 @@ def build_parser():
     e.add_argument('--out', required=True)
     e.add_argument('--seed', type=int, default=0)
     e.add_argument('--quick', action='store_true', help='fewer components/folds (for smoke runs)')
+    e.add_argument('--bags', default=None,
+                   help='evaluate on this folder of bags (with labels.json) instead of generating')
     e.set_defaults(func=_evaluate)
 
     d = sub.add_parser('demo', help='closed loop: bags -> observer -> estimator -> MuJoCo iiwa')

@@ -30,6 +30,7 @@ STATES = ('idle', 'observing', 'committed', 'done')
 REJECT_REASONS = ('wrong_frame', 'non_finite', 'outside_interaction', 'before_onset',
                   'time_backwards', 'exception', 'bad_joint_state')
 PHASE_EPS = 1e-6
+MAX_LAG = 1.0   # s; a present further from the latest observation means another clock
 
 
 def summary_labels(n_components: int) -> list:
@@ -376,8 +377,13 @@ class InteractionPlanner:
         return self.reject(reason)
 
     # -- planning ---------------------------------------------------------------------
-    def step(self, final: bool = False) -> Optional[Step]:
-        """Replan (timer): None when there is no interaction or nothing new since the last."""
+    def step(self, final: bool = False, clock_now: Optional[float] = None) -> Optional[Step]:
+        """Replan (timer): None when there is no interaction or nothing new since the last.
+
+        ``clock_now``: the present on the stamps' clock (s since onset), when known. Observations
+        reach the planner some milliseconds after their stamps; the plan starts from the present
+        (if it is later than the latest observation by less than MAX_LAG s), so its first point
+        and its end are never already in the past when the controller receives it."""
         if not self.active or not (self._dirty or final):
             return None
         self._dirty = False
@@ -389,7 +395,10 @@ class InteractionPlanner:
         k, alpha, phase, confidence = int(summary[-1]), summary[K], summary[K + 1], summary[K + 2]
         rec.update(component=k, label=self.label(k), confidence=float(confidence),
                    alpha=float(alpha), phase=float(phase))
-        plan = build_plan(est, t_now, n_points=self.n_points, lookahead=self.lookahead,
+        t_plan = t_now
+        if clock_now is not None and t_now < clock_now <= t_now + MAX_LAG:
+            t_plan = clock_now
+        plan = build_plan(est, t_plan, n_points=self.n_points, lookahead=self.lookahead,
                           settle_time=self.settle_time, component=k, alpha=alpha,
                           final_time=self._final_time, robot_q=self.robot_q,
                           catch_up_velocity=self.catch_up_velocity,
@@ -421,14 +430,14 @@ class InteractionPlanner:
         return Step(summary, plan, send=True, committed_now=committed_now,
                     switched_from=switched_from)
 
-    def end(self, stamp_ns: int) -> Optional[Step]:
+    def end(self, stamp_ns: int, clock_now: Optional[float] = None) -> Optional[Step]:
         """The human stopped: the last plan (sent only if committed), then 'done'."""
         if not self.active:
             return None
         t_end = (int(stamp_ns) - self._onset_ns) * 1e-9
         if np.isfinite(t_end) and t_end > self.t_now:
             self._t_latest = t_end
-        step = self.step(final=True)
+        step = self.step(final=True, clock_now=clock_now)
         self._close('end', t_end)
         return step
 

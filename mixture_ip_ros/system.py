@@ -130,7 +130,8 @@ class ClosedLoop:
             chosen_pattern=self.labels[k] if k is not None else None,
             commit_fraction=commit_phase, target=None if target is None else np.asarray(target),
             extra={'interaction': inter, 'non_finite_commands': self.recorder.non_finite_commands,
-                   'sim_rejections': self.sim.rejection_count})
+                   'sim_rejections': self.sim.rejection_count,
+                   'last_rejection': self.sim.last_rejection})
 
     def close(self):
         self.executor.shutdown()

@@ -412,3 +412,21 @@ def test_catch_up_drops_points_the_robot_cannot_reach_in_time(trained):
     assert np.all(np.diff(plan.times) > 0)
     near = build_plan(est, t_now, n_points=25, robot_q=free.positions[0], catch_up_velocity=speed)
     assert np.allclose(near.times, free.times)
+
+
+def test_plan_starts_from_the_present_when_observations_lag(trained):
+    """The first point is lookahead ahead of the present (clock_now), not of the latest
+    observation, when the two differ by a plausible processing lag; another clock is ignored."""
+    model, meta, demos = trained
+    demo = demos[0]
+    results = {}
+    for clock_now in (None, 0.3, 50.0):
+        planner, _ = _planner(model, meta)
+        onset = 5_000_000_000
+        planner.onset(onset)
+        for t, y in zip(demo.t[:60], demo.observed[:60]):
+            planner.observe(onset + _ns(t), y)
+        step = planner.step(clock_now=None if clock_now is None else demo.t[59] + clock_now)
+        results[clock_now] = step.plan.times[0]
+    assert results[50.0] == pytest.approx(results[None])
+    assert results[0.3] == pytest.approx(results[None] + 0.3, abs=1e-9)

@@ -80,7 +80,7 @@ def trajectory_distribution(mean, cov, basis: GaussianBasis, z, alpha: float = 1
     }
     if cov is None:
         return out
-    idx = np.concatenate([np.arange(j * N, (j + 1) * N) for j in dofs])
+    idx = np.array([i for j in dofs for i in range(j * N, (j + 1) * N)], dtype=int)
     C = cov[np.ix_(idx, idx)].reshape(len(dofs), N, len(dofs), N)
     out['position_cov'] = np.einsum('tn,injk,tk->tij', psi, C, psi, optimize=True)
     return out

@@ -258,7 +258,7 @@ class EstimatorNode(Node):
                 self.events['end'] += 1
                 if self.planner.active:
                     t0 = time.perf_counter()
-                    self._publish_step(self.planner.end(stamp_ns), t0)
+                    self._publish_step(self.planner.end(stamp_ns, self._clock_since_onset()), t0)
                     self._log_finished(self.planner.current)
             elif kind == 'gap':
                 self.events['gap'] += 1
@@ -271,12 +271,17 @@ class EstimatorNode(Node):
             self.get_logger().error(f'event {msg.frame_id!r} failed: {exc!r}',
                                     throttle_duration_sec=self._throttle)
 
+    def _clock_since_onset(self):
+        """The node clock (sim time with use_sim_time) in s since the onset, or None."""
+        onset = self.planner.onset_ns
+        return None if onset is None else (self.get_clock().now().nanoseconds - onset) * 1e-9
+
     def replan(self) -> None:
         """Timer: update the posterior summary, the predicted path and (once committed) the
         robot's trajectory from what was observed so far."""
         try:
             t0 = time.perf_counter()
-            self._publish_step(self.planner.step(), t0)
+            self._publish_step(self.planner.step(clock_now=self._clock_since_onset()), t0)
         except Exception as exc:
             self.get_logger().error(f'replanning failed: {exc!r}',
                                     throttle_duration_sec=self._throttle)
