@@ -9,9 +9,12 @@ os.environ.setdefault('MUJOCO_GL', 'osmesa')
 import pytest  # noqa: E402
 
 
-def private_domain_id() -> int:
-    """A domain id unlikely to collide with another run on this machine (fastdds allows 0-232)."""
-    return 100 + os.getpid() % 100
+def private_domain_id(offset: int = 0) -> int:
+    """A domain id unlikely to collide with another run on this machine: 100-159, plus
+    ``offset`` (< 70) for a second domain in the same test. Fast DDS allows 0-232 only."""
+    if not 0 <= offset < 70:
+        raise ValueError('offset must be in [0, 70)')
+    return 100 + os.getpid() % 60 + offset
 
 
 @pytest.fixture

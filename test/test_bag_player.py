@@ -108,7 +108,8 @@ def test_plays_every_message_in_order_with_original_timing(ros_context, bag):
     assert late.size == player.published and np.all(late >= 0)
     assert np.median(late) < 0.05
     span = (t[-1] - t[0]) / 2.0  # bag span at rate 2
-    assert span - 1e-3 <= player.last_sent - player.first_sent <= span + 0.5
+    # the first message may itself be late by late[0], which shortens the measured span
+    assert span - late[0] - 1e-3 <= player.last_sent - player.first_sent <= span + 0.5
 
 
 def test_remap_rewrite_stamps_and_clock(ros_context, bag):

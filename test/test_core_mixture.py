@@ -76,7 +76,7 @@ def test_mixture_em_is_monotone_and_matches_direct_log_likelihood(three_patterns
         for d in demos])
     dens = sum(m.weights_[k] * multivariate_normal(m.means_[k], m.covariances_[k]).pdf(W)
                for k in range(3))
-    penalty = sum(-0.5 * m.prior_strength * (np.sum(m.prior_cov_diag_ * np.diag(np.linalg.inv(C)))
+    penalty = sum(-0.5 * m.prior_strength * (np.trace(m.prior_cov_ @ np.linalg.inv(C))
                                              + np.linalg.slogdet(C)[1]) for C in m.covariances_)
     assert m.log_likelihood_[-1] == pytest.approx(np.log(dens).sum() + penalty, rel=1e-8)
 

@@ -163,7 +163,7 @@ def test_cross_process_one_interaction(setup, tmp_path):
     from rclpy.executors import SingleThreadedExecutor
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
-    domain = private_domain_id() + 100
+    domain = private_domain_id(offset=60)
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), OPENBLAS_NUM_THREADS='1',
                ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     bindir = Path(sys.executable).parent

@@ -62,7 +62,7 @@ def gmm_responsibilities(W, weights, means, covs):
     return np.exp(lp - norm[:, None]), float(norm.sum())
 
 
-def gmm_maximization(W, resp, prior_diag, prior_strength, extra_cov=None):
+def gmm_maximization(W, resp, prior_cov, prior_strength, extra_cov=None):
     """Eqs. 8-10 with the conjugate covariance prior (see ProMP). ``extra_cov`` (n, K, d, d)
     adds E[(w - mu_ik)(w - mu_ik)^T] when the weights are latent (missing-data EM)."""
     n = len(resp)
@@ -77,7 +77,7 @@ def gmm_maximization(W, resp, prior_diag, prior_strength, extra_cov=None):
         S = (resp[:, k, None] * E).T @ E                                    # eq. 10
         if extra_cov is not None:
             S += np.einsum('i,ide->de', resp[:, k], extra_cov[:, k])
-        covs[k] = _regularised_cov(S, nk[k], prior_diag, prior_strength)
+        covs[k] = _regularised_cov(S, nk[k], np.asarray(prior_cov), prior_strength)
     return weights, means, covs
 
 
@@ -90,15 +90,18 @@ class MixtureIProMP:
     per-component prior over the phase speed alpha = 1/T, ``log_likelihood_`` per EM iteration
     (penalised, monotone), ``resp_`` (n, K).
 
-    ``prior_strength`` pseudo-samples of a diagonal covariance (``prior_scale`` times each
-    weight's variance over all demonstrations) regularise every component covariance, which
-    keeps it positive definite (and the posterior calibrated) with fewer members than weights.
+    ``prior_strength`` pseudo-samples of a shared covariance ``prior_cov_`` regularise every
+    component covariance (conjugate prior, so EM stays monotone in the penalised likelihood):
+    the within-component covariance pooled over the k-means clusters (``method='regression'``)
+    plus a diagonal floor of ``prior_scale`` times each weight's variance over all
+    demonstrations. This keeps every
+    component positive definite with fewer members than weights and its posterior calibrated.
     ``observation_noise`` (metres) is the sensor noise added to the learned residual variance
     of the observed agent when conditioning on new observations.
     """
 
     def __init__(self, n_components: int = 3, n_basis: int = 15, method: str = 'regression',
-                 ridge: float = 1e-6, prior_strength: float = 2.0, prior_scale: float = 0.02,
+                 ridge: float = 1e-6, prior_strength: float = 10.0, prior_scale: float = 0.02,
                  max_iter: int = 200, tol: float = 1e-7, n_init: int = 10, random_state=0,
                  observation_noise: float = 0.01, min_alpha_rel_std: float = 0.05):
         self.n_components = n_components
@@ -137,11 +140,22 @@ class MixtureIProMP:
                                      for j in range(len(st.m))]))
         W = np.array(W)
         n, d = W.shape
-        self.prior_cov_diag_ = self.prior_scale * np.maximum(W.var(axis=0), 1e-12)
-        labels = kmeans(W / np.sqrt(self.prior_cov_diag_), self.n_components,
+        floor = self.prior_scale * np.maximum(W.var(axis=0), 1e-12)
+        labels = kmeans(W / np.sqrt(floor), self.n_components,
                         random_state=self.random_state, n_init=self.n_init)
         resp = np.eye(self.n_components)[labels]
-        weights, means, covs = gmm_maximization(W, resp, self.prior_cov_diag_, self.prior_strength)
+        # Shrinkage target: the within-component covariance pooled over the k-means clusters
+        # (shape variability shared by all patterns) plus a small diagonal floor. A component
+        # with a dozen members then borrows the pooled structure instead of trusting spurious
+        # correlations of its own sample covariance.
+        # With missing data ('em') the starting weights are unreliable where a demonstration
+        # has gaps, so the target is the diagonal floor alone.
+        self.prior_cov_ = np.diag(floor)
+        if self.method == 'regression':
+            E = W - np.array([W[labels == k].mean(axis=0)
+                              for k in range(self.n_components)])[labels]
+            self.prior_cov_ += E.T @ E / n
+        weights, means, covs = gmm_maximization(W, resp, self.prior_cov_, self.prior_strength)
         resid = sum(expected_sq_residual(st, w, np.zeros((d, d))) for st, w in zip(stats, W))
         noise = np.maximum(resid / np.maximum(sum(st.m for st in stats), 1), 1e-10)
         self.log_likelihood_ = []
@@ -154,14 +168,14 @@ class MixtureIProMP:
             else:
                 resp, ll, post_means, post_covs = self._latent_e_step(stats, weights, means, covs,
                                                                       noise)
-            ll += sum(covariance_penalty(linalg.cho_factor(c, lower=True), self.prior_cov_diag_,
+            ll += sum(covariance_penalty(linalg.cho_factor(c, lower=True), self.prior_cov_,
                                          self.prior_strength) for c in covs)
             self.log_likelihood_.append(ll)
             if ll - prev < self.tol * max(1.0, abs(ll)):
                 self.converged_ = True
                 break
             prev = ll
-            weights, means, covs = gmm_maximization(post_means, resp, self.prior_cov_diag_,
+            weights, means, covs = gmm_maximization(post_means, resp, self.prior_cov_,
                                                     self.prior_strength, post_covs)
             if self.method == 'em':
                 num = sum(resp[i, k] * expected_sq_residual(stats[i], post_means[i, k],

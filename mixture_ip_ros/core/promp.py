@@ -112,13 +112,15 @@ def expected_sq_residual(stats: ObservationStats, post_mean, post_cov):
     return out
 
 
-def covariance_penalty(cov_chol, prior_cov_diag, strength):
-    """log of the conjugate covariance prior used to regularise: -s/2 (tr(Omega Sigma^-1) + log|Sigma|)."""
+def covariance_penalty(cov_chol, prior_cov, strength):
+    """log of the conjugate covariance prior used to regularise: -s/2 (tr(Omega Sigma^-1) +
+    log|Sigma|); ``prior_cov`` Omega is a matrix or the diagonal of one."""
     if strength == 0:
         return 0.0
-    inv_diag = np.diag(linalg.cho_solve(cov_chol, np.eye(cov_chol[0].shape[0])))
+    inv = linalg.cho_solve(cov_chol, np.eye(cov_chol[0].shape[0]))
+    trace = np.sum(prior_cov * np.diag(inv)) if prior_cov.ndim == 1 else np.sum(prior_cov * inv)
     logdet = 2 * np.sum(np.log(np.diag(cov_chol[0])))
-    return -0.5 * strength * (np.sum(prior_cov_diag * inv_diag) + logdet)
+    return -0.5 * strength * (trace + logdet)
 
 
 class ProMP:
@@ -233,9 +235,11 @@ class ProMP:
         return mean, std
 
 
-def _regularised_cov(S, n, prior_diag, strength):
-    """MAP covariance under the conjugate prior: (S + s Omega) / (n + s); symmetric by construction."""
-    cov = (S + strength * np.diag(prior_diag)) / (n + strength)
+def _regularised_cov(S, n, prior_cov, strength):
+    """MAP covariance under the conjugate prior: (S + s Omega) / (n + s); symmetric by
+    construction. ``prior_cov`` Omega is a matrix or its diagonal."""
+    omega = np.diag(prior_cov) if prior_cov.ndim == 1 else prior_cov
+    cov = (S + strength * omega) / (n + strength)
     return 0.5 * (cov + cov.T)
 
 

@@ -21,7 +21,7 @@ _PARAMS = ('n_components', 'n_basis', 'method', 'ridge', 'prior_strength', 'prio
            'max_iter', 'tol', 'n_init', 'random_state', 'observation_noise',
            'min_alpha_rel_std')
 _ARRAYS = ('weights', 'means', 'covariances', 'noise_var', 'alpha_mean', 'alpha_std',
-           'prior_cov_diag')
+           'prior_cov')
 
 
 class ModelFileError(ValueError):
@@ -97,7 +97,7 @@ def load_model(path, *, observed_names=None, controlled_names=None):
     d = (P + Q) * basis.n_basis
     expected = {'weights': (K,), 'means': (K, d), 'covariances': (K, d, d),
                 'noise_var': (P + Q,), 'alpha_mean': (K,), 'alpha_std': (K,),
-                'prior_cov_diag': (d,)}
+                'prior_cov': (d, d)}
     for name, shape in expected.items():
         if data[name].shape != shape:
             fail(f'{name} has shape {data[name].shape}, expected {shape}')

@@ -144,6 +144,7 @@ class EstimatorNode(Node):
         self._replan_period = 1.0 / float(param('replan_rate_hz'))
         self._replan_on_observation = bool(param('replan_on_observation'))
         self._next_replan = None   # stamp-clock time (s since onset) of the next replan
+        self._last_replan_wall = -float('inf')
         self.latency = LatencyStats()         # OnlineEstimator update, per used observation
         self.plan_latency = LatencyStats()    # one replan: posterior, plan, messages, publish
         self.events = {'onset': 0, 'end': 0, 'gap': 0, 'unknown': 0}
@@ -229,9 +230,14 @@ class EstimatorNode(Node):
                 # Replan right away (at most at replan_rate_hz on the stamps' clock): the
                 # robot reacts within the observation's latency, not a timer period.
                 t = self.planner.t_now
-                if self._replan_on_observation and (self._next_replan is None
-                                                    or t >= self._next_replan):
+                # Also limited on the wall clock: the observations held back until an onset
+                # arrive as a burst and must not each cost a replan (the timer follows up).
+                wall = time.perf_counter()
+                if self._replan_on_observation and (
+                        self._next_replan is None or t >= self._next_replan - 1e-9) and (
+                        wall - self._last_replan_wall >= self._replan_period):
                     self._next_replan = t + self._replan_period
+                    self._last_replan_wall = wall
                     self.replan()
             elif result not in ('skipped', 'held'):
                 self._warn_rejected(result, f'stamp {msg.header.stamp.sec}.'
