@@ -21,6 +21,7 @@ truncated storage, undecodable message, joints missing from the JointState) rais
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping, Optional, Sequence
@@ -255,6 +256,21 @@ def _open_reader(path: Path):
     return reader
 
 
+@contextmanager
+def _reading(path: Path):
+    """An open reader of ``path``; any failure while reading becomes a BagError naming it."""
+    reader = _open_reader(path)
+    try:
+        yield reader
+    except BagError:
+        raise
+    except Exception as exc:  # rosbags raises many types on truncated or corrupt storage
+        raise BagError(path, f'cannot read messages (truncated or corrupt storage?): '
+                             f'{type(exc).__name__}: {exc}') from exc
+    finally:
+        reader.close()
+
+
 def bag_custom_data(path) -> dict:
     """The ``custom_data`` map of a bag directory's metadata.yaml ({} if none)."""
     path = Path(path)
@@ -284,8 +300,7 @@ def bag_topics(path) -> dict:
 def read_messages(path, topics: Optional[Sequence[str]] = None) -> list:
     """All messages of a bag (optionally only ``topics``) as :class:`BagMessage`, in log-time order."""
     path = Path(path)
-    reader = _open_reader(path)
-    try:
+    with _reading(path) as reader:
         conns = reader.connections
         if topics is not None:
             missing = sorted(set(topics) - {c.topic for c in conns})
@@ -294,13 +309,6 @@ def read_messages(path, topics: Optional[Sequence[str]] = None) -> list:
             conns = [c for c in conns if c.topic in set(topics)]
         out = [BagMessage(c.topic, c.msgtype, int(ns), bytes(data))
                for c, ns, data in reader.messages(connections=conns)]
-    except BagError:
-        raise
-    except Exception as exc:
-        raise BagError(path, f'cannot read messages (truncated or corrupt storage?): '
-                             f'{type(exc).__name__}: {exc}') from exc
-    finally:
-        reader.close()
     out.sort(key=lambda m: m.log_time_ns)
     return out
 
@@ -335,8 +343,7 @@ def read_bag(path, *, wrist_topic: str = WRIST_TOPIC, joint_topic: str = JOINT_T
     joint_names = tuple(joint_names)
     custom = bag_custom_data(path) if path.is_dir() else {}
     ts = typestore()
-    reader = _open_reader(path)
-    try:
+    with _reading(path) as reader:
         conns = reader.connections
         wrist_conns = _find_connection(path, conns, wrist_topic, WRIST_TYPE)
         joint_conns = _find_connection(path, conns, joint_topic, JOINT_TYPE)
@@ -374,13 +381,6 @@ def read_bag(path, *, wrist_topic: str = WRIST_TOPIC, joint_topic: str = JOINT_T
                 j_ns.append(_stamp_or_log(msg.header.stamp, log_ns))
                 j_q.append(pos[index])
                 j_qd.append(vel[index] if vel.size == len(names) else None)
-    except BagError:
-        raise
-    except Exception as exc:
-        raise BagError(path, f'cannot read messages (truncated or corrupt storage?): '
-                             f'{type(exc).__name__}: {exc}') from exc
-    finally:
-        reader.close()
 
     if not w_ns:
         raise BagError(path, f'topic {wrist_topic!r} has no messages')
