@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import MultiThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -52,11 +52,11 @@ class ClosedLoop:
                                                         10)
         self.kinematics = IiwaKinematics()
         self.wrist_topic = self.observer.get_parameter('wrist_topic').value
-        self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
+        # One single-threaded executor per node, each in its own thread: a node waiting for the
+        # GIL never holds up another's queue (one MultiThreadedExecutor lagged by up to 0.5 s).
+        self._spinning = {}
         for node in (self.sim, self.observer, self.estimator, self.recorder):
-            self.executor.add_node(node)
-        self._spin = threading.Thread(target=self.executor.spin, daemon=True)
-        self._spin.start()
+            self._spin(node)
         self.labels = (self.estimator.metadata.get('component_labels')
                        or [f'component_{k}' for k in range(self.estimator.model.n_components)])
 
@@ -95,13 +95,13 @@ class ClosedLoop:
             Parameter('use_sim_time', value=True)] + _params(
             {'bag': str(bag), 'rewrite_stamps': True, 'topics': [self.wrist_topic],
              **(extra_params or {})}))
-        self.executor.add_node(player)
+        self._spin(player)
         try:
             if not player.wait_until_finished(timeout):
                 raise TimeoutError(f'playing {bag} did not finish within {timeout} s')
             self.wait_sim(settle)
         finally:
-            self.executor.remove_node(player)
+            self._stop(player)
             player.destroy_node()
         return self._record(Path(bag).name, true_pattern, target, start)
 
@@ -134,8 +134,21 @@ class ClosedLoop:
                    'last_rejection': self.sim.last_rejection})
 
     def close(self):
-        self.executor.shutdown()
-        for node in (self.sim, self.observer, self.estimator, self.recorder):
+        nodes = (self.sim, self.observer, self.estimator, self.recorder)
+        for node in nodes:
+            self._stop(node)
+        for node in nodes:
             node.destroy_node()
         rclpy.try_shutdown(context=self.context)
-        self._spin.join(timeout=5)
+
+    def _spin(self, node):
+        executor = SingleThreadedExecutor(context=self.context)
+        executor.add_node(node)
+        thread = threading.Thread(target=executor.spin, daemon=True)
+        thread.start()
+        self._spinning[node] = (executor, thread)
+
+    def _stop(self, node):
+        executor, thread = self._spinning.pop(node)
+        executor.shutdown()
+        thread.join(timeout=5)

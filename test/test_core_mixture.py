@@ -127,13 +127,15 @@ def test_posterior_is_calibrated_leave_one_out(three_patterns):
     assert np.mean(np.abs(zs) < 2) > 0.85
 
 
-def test_leave_one_out_selects_three_patterns(three_patterns):
-    demos = three_patterns[0]
+def test_leave_one_out_selects_three_patterns():
+    """One observed DOF: with three, the three pattern means are an affine function of the final
+    wrist position, so a single Gaussian predicts them too and K would not matter."""
+    demos = mixture_demos(seed=0, n_obs=1)[0]
     candidates = [1, 2, 3, 4, 5]
     rms = loo_rms_by_components(demos, candidates, n_basis=8)
     K = candidates[select_n_components(rms)]
     assert K == 3
-    assert rms.mean(axis=1)[2] < 0.7 * rms.mean(axis=1)[0]
+    assert rms.mean(axis=1)[2] < 0.2 * rms.mean(axis=1)[0]
 
 
 def test_component_posterior_picks_true_pattern_from_final_position(three_patterns):
