@@ -16,7 +16,7 @@ stamps are a synthetic clock from 1000 s, so segmentation and estimation are det
 short demo is replayed first as warm-up (not measured).
 
 Which pose triggered a trajectory: the estimator publishes /estimator/predicted_wrist (stamped
-onset + t_now, t_now = the observation that triggered the replan) just before each trajectory,
+onset + t_now, t_now = the observation that triggered the replan) just after each trajectory,
 and after the commit every replan sends both, so the i-th last trajectory of an interaction
 pairs with its i-th last path (read raw: only the stamp is parsed). Cross-check: for plans with
 several points, trigger = header.stamp + first time_from_start - lookahead (disagreements and
@@ -38,8 +38,6 @@ Keys (ms unless named otherwise):
   e2e_ms_p99_live     without the onset-confirming poses; e2e_ms_*_steady: only poses at least
                       STEADY_AFTER_S after the onset confirmation; e2e_ms_max_transient: the
                       earlier ones (the onset burst and the catching up after it)
-  *_multi             the same with one MultiThreadedExecutor(num_threads=4) for all three
-                      nodes (as system.ClosedLoop spins its nodes)
   *_deployed          in-process with config/estimator.yaml unchanged (observations used every
                       min_interval, replans at replan_rate_hz): the poses that trigger a replan
   *_cross_process     observer_node and estimator_node executables as subprocesses (params
@@ -78,7 +76,7 @@ os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 import numpy as np  # noqa: E402
 import rclpy  # noqa: E402
 from rclpy.context import Context  # noqa: E402
-from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile,  # noqa: E402
@@ -381,25 +379,18 @@ def latency_keys(res, suffix):
 
 # ---------------------------------------------------------------------------- in-process
 class InProcess:
-    def __init__(self, ctx, model_path, overrides, mode):
+    def __init__(self, ctx, model_path, overrides):
         self.observer = ObserverNode(context=ctx, parameter_overrides=as_parameters(
             OBSERVER_PARAMS))
         self.estimator = EstimatorNode(context=ctx, parameter_overrides=as_parameters(
             {**ESTIMATOR_PARAMS, 'model_path': str(model_path), **overrides}))
         self.probe = Probe(context=ctx)
-        nodes = (self.observer, self.estimator, self.probe)
-        if mode in ('multi', 'single'):
-            ex = (MultiThreadedExecutor(num_threads=4, context=ctx) if mode == 'multi'
-                  else SingleThreadedExecutor(context=ctx))
-            for n in nodes:
-                ex.add_node(n)
-            self.executors = [ex]
-        else:
-            self.executors = []
-            for n in nodes:
-                ex = SingleThreadedExecutor(context=ctx)
-                ex.add_node(n)
-                self.executors.append(ex)
+        # One SingleThreadedExecutor per node in its own thread, as system.ClosedLoop.
+        self.executors = []
+        for n in (self.observer, self.estimator, self.probe):
+            ex = SingleThreadedExecutor(context=ctx)
+            ex.add_node(n)
+            self.executors.append(ex)
         self.threads = [threading.Thread(target=ex.spin, daemon=True) for ex in self.executors]
         for t in self.threads:
             t.start()
@@ -431,11 +422,11 @@ def warm_stream(g, k):
     return s
 
 
-def run_latency_in_process(domain, model_path, warm, stream, mode, overrides):
+def run_latency_in_process(domain, model_path, warm, stream, overrides):
     ctx = Context()
     rclpy.init(context=ctx, domain_id=domain)
     try:
-        p = InProcess(ctx, model_path, overrides, mode)
+        p = InProcess(ctx, model_path, overrides)
         try:
             time.sleep(0.3)   # matching in one participant is quick, but asynchronous
             for s in (warm, stream):
@@ -460,14 +451,14 @@ def run_latency_in_process(domain, model_path, warm, stream, mode, overrides):
 
 
 # ---------------------------------------------------------------------------- sustained
-def run_sustained(domain, model_path, warm, g, rates, overrides, mode):
+def run_sustained(domain, model_path, warm, g, rates, overrides):
     """One pipeline; after a warm-up, per rate one interaction (demo ``g`` resampled)."""
     ctx = Context()
     rclpy.init(context=ctx, domain_id=domain)
     runs = []
     params = estimator_params(overrides)
     try:
-        p = InProcess(ctx, model_path, overrides, mode)
+        p = InProcess(ctx, model_path, overrides)
         try:
             time.sleep(0.3)
             p.probe.publish_stream(warm, warm.messages())
@@ -660,24 +651,14 @@ def main():
         result['replayed'] = [f'{g.name}:{g.label}:{g.duration:.2f}s' for g in chosen]
 
         # Headline: in-process, one SingleThreadedExecutor per node, every pose replanned.
-        res, stats = run_latency_in_process(domain, model_path, warm, stream, 'threads',
-                                            every_pose)
+        res, stats = run_latency_in_process(domain, model_path, warm, stream, every_pose)
         result.update(latency_keys(res, ''))
         result.update(stats)
         result['in_process_executor'] = ('one SingleThreadedExecutor per node (observer, '
                                          'estimator, probe), each spun in its own thread')
-        # The same with one MultiThreadedExecutor(num_threads=4) (as system.ClosedLoop).
-        res, stats = run_latency_in_process(domain, model_path, warm, stream, 'multi',
-                                            every_pose)
-        result.update(pick(latency_keys(res, '_multi'), '_multi',
-                           ('e2e_ms_median', 'e2e_ms_p99', 'e2e_ms_max', 'e2e_ms_p99_steady',
-                            'onset_ms_max', 'n_samples')))
-        result['estimator_rejected_multi'] = stats['estimator_rejected']
-        result['estimator_uncommitted_interactions_multi'] = stats[
-            'estimator_uncommitted_interactions']
         # Deployed replanning (config/estimator.yaml: observations used at most every
         # min_interval, replans at replan_rate_hz): latency of the poses that trigger a replan.
-        res, stats = run_latency_in_process(domain, model_path, warm, stream, 'threads', {})
+        res, stats = run_latency_in_process(domain, model_path, warm, stream, {})
         lk = latency_keys(res, '_deployed')
         result.update(pick(lk, '_deployed', (
             'e2e_ms_median', 'e2e_ms_p99', 'e2e_ms_max', 'e2e_ms_p99_steady', 'n_samples',
@@ -695,7 +676,7 @@ def main():
             result.update({'e2e_ms_median_cross_process': None, 'e2e_ms_p99_cross_process': None})
 
         g_sus = next(g for g in chosen if g.label == 'plate')
-        best, runs = run_sustained(domain, model_path, warm, g_sus, rates, {}, 'threads')
+        best, runs = run_sustained(domain, model_path, warm, g_sus, rates, {})
         result['sustained_hz'] = best
         result['sustained_mode'] = (
             'in-process, one SingleThreadedExecutor per node; config/*.yaml parameters '
@@ -707,8 +688,7 @@ def main():
             f'{LAG_BOUND_MS:.0f} ms and everything delivered within {LAG_BOUND_MS:.0f} ms of '
             f'the last pose (the onset burst transient is reported, not judged)')
         result['sustained_runs'] = runs
-        best, runs = run_sustained(domain, model_path, warm, g_sus, rates[:3], every_pose,
-                                   'threads')
+        best, runs = run_sustained(domain, model_path, warm, g_sus, rates[:3], every_pose)
         result['sustained_hz_replan_every_obs'] = best
         result['sustained_runs_replan_every_obs'] = [
             {k: r[k] for k in ('rate_hz', 'achieved_hz', 'lost_poses', 'lost_observations',

@@ -386,7 +386,7 @@ def test_config_file_declares_the_defaults(ros_context, trained):
 
 def test_observations_trigger_replans_at_the_configured_rate(harness, trained):
     """With replan_on_observation, a used observation replans at once, at most every
-    1/replan_rate_hz on the stamps' clock (the wall-clock timer may add a few more)."""
+    1/replan_rate_hz on the stamps' clock."""
     _, held = trained
     demo = held[2]
     h = harness(replan_rate_hz=5.0, diagnostics_period=1e3)
@@ -399,5 +399,6 @@ def test_observations_trigger_replans_at_the_configured_rate(harness, trained):
             h.executor.spin_once(timeout_sec=0.002)
     h.spin_until(lambda: len(h.got['posterior']) >= int(demo.t[n - 1] / 0.2) - 1, what='replans')
     assert h.got['trajectory'], 'no trajectory from observation-triggered replans'
-    timer_ticks = 5 * 4    # generous: the feed and spin take well under 4 s of wall time
-    assert len(h.got['posterior']) <= int(demo.t[n - 1] / 0.2) + 2 + timer_ticks
+    # The timer only covers pauses: it does not double the replans while observations flow
+    # (it did, before it skipped periods in which an observation had replanned).
+    assert len(h.got['posterior']) <= int(demo.t[n - 1] / 0.2) + 2

@@ -22,9 +22,8 @@ Publishes   /iiwa/joint_trajectory     trajectory_msgs/JointTrajectory, reliable
                 diagnostics_period s: state, update latency (last/mean/max us), observations
                 used/skipped/rejected by reason, commit phase, plans sent.
 Times are those of the observations' stamps: an observation is at stamp - onset stamp.
-Timers run on the node clock (use_sim_time works); nothing is planned in the observation
-callback. Refuses to start (ValueError, non-zero exit from main) without a valid model whose
-joints, observed DOFs and frame match the parameters.
+Timers run on the node clock (use_sim_time works). Refuses to start (ValueError, non-zero exit
+from main) without a valid model whose joints, observed DOFs and frame match the parameters.
 """
 
 import sys
@@ -144,7 +143,7 @@ class EstimatorNode(Node):
         self._replan_period = 1.0 / float(param('replan_rate_hz'))
         self._replan_on_observation = bool(param('replan_on_observation'))
         self._next_replan = None   # stamp-clock time (s since onset) of the next replan
-        self._last_replan_wall = -float('inf')
+        self._last_replan_wall = -float('inf')   # of the latest replan by an observation
         self.latency = LatencyStats()         # OnlineEstimator update, per used observation
         self.plan_latency = LatencyStats()    # one replan: posterior, plan, messages, publish
         self.events = {'onset': 0, 'end': 0, 'gap': 0, 'unknown': 0}
@@ -172,7 +171,7 @@ class EstimatorNode(Node):
                                  in_qos)
         self.create_subscription(JointState, param('joint_state_topic'), self.on_joint_state,
                                  qos_profile_sensor_data)
-        self.create_timer(1.0 / float(param('replan_rate_hz')), self.replan)
+        self.create_timer(1.0 / float(param('replan_rate_hz')), self.on_replan_timer)
         self.create_timer(float(param('diagnostics_period')), self.publish_diagnostics)
         labels = meta.get('component_labels')
         self.get_logger().info(
@@ -232,12 +231,11 @@ class EstimatorNode(Node):
                 t = self.planner.t_now
                 # Also limited on the wall clock: the observations held back until an onset
                 # arrive as a burst and must not each cost a replan (the timer follows up).
-                wall = time.perf_counter()
                 if self._replan_on_observation and (
                         self._next_replan is None or t >= self._next_replan - 1e-9) and (
-                        wall - self._last_replan_wall >= self._replan_period):
+                        time.perf_counter() - self._last_replan_wall >= self._replan_period):
                     self._next_replan = t + self._replan_period
-                    self._last_replan_wall = wall
+                    self._last_replan_wall = time.perf_counter()
                     self.replan()
             elif result not in ('skipped', 'held'):
                 self._warn_rejected(result, f'stamp {msg.header.stamp.sec}.'
@@ -282,9 +280,14 @@ class EstimatorNode(Node):
         onset = self.planner.onset_ns
         return None if onset is None else (self.get_clock().now().nanoseconds - onset) * 1e-9
 
+    def on_replan_timer(self) -> None:
+        """Covers pauses: replans unless an observation replanned within the last period."""
+        if time.perf_counter() - self._last_replan_wall >= self._replan_period:
+            self.replan()
+
     def replan(self) -> None:
-        """Timer: update the posterior summary, the predicted path and (once committed) the
-        robot's trajectory from what was observed so far."""
+        """Update the posterior summary, the predicted path and (once committed) the robot's
+        trajectory from what was observed so far."""
         try:
             t0 = time.perf_counter()
             self._publish_step(self.planner.step(clock_now=self._clock_since_onset()), t0)
@@ -298,15 +301,17 @@ class EstimatorNode(Node):
         if step is None:
             return
         onset_ns = self.planner.onset_ns
+        plan = step.plan if step.problem is None else None
+        # The robot's trajectory first: it is what the latency is about.
+        if plan is not None and step.send:
+            self._traj_pub.publish(self._trajectory_msg(plan, onset_ns))
         self._post_pub.publish(self._posterior_msg(step.summary))
-        if step.problem is not None:
+        if plan is None:
             self.get_logger().error(f'plan not published: {step.problem}',
                                     throttle_duration_sec=self._throttle)
             return
-        plan = step.plan
         self._path_pub.publish(self._path_msg(plan, onset_ns))
         if step.send:
-            self._traj_pub.publish(self._trajectory_msg(plan, onset_ns))
             rec = self.planner.current
             if step.committed_now:
                 self.get_logger().info(
@@ -337,11 +342,12 @@ class EstimatorNode(Node):
         msg.header.frame_id = self.observed_frame
         msg.header.stamp = _time_msg(onset_ns + round(self.planner.t_now * 1e9))
         poses = []
-        for t, xyz in zip(plan.wrist_times.tolist(), plan.wrist_positions.tolist()):
+        for t, (x, y, z) in zip(plan.wrist_times.tolist(), plan.wrist_positions.tolist()):
             pose = PoseStamped()
             pose.header.frame_id = self.observed_frame
             pose.header.stamp = _time_msg(onset_ns + round(t * 1e9))
-            pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = xyz
+            position = pose.pose.position
+            position.x, position.y, position.z = x, y, z
             pose.pose.orientation.w = 1.0
             poses.append(pose)
         msg.poses = poses
