@@ -19,8 +19,12 @@ def model_and_demos():
     return MixtureIProMP(3, n_basis=8).fit(demos), demos, labels
 
 
-def test_recursive_log_evidence_equals_batch_eq18(model_and_demos):
+@pytest.mark.parametrize('n_obs', [3, 1, 4])   # the kernel works on rows of G in threes
+def test_recursive_log_evidence_equals_batch_eq18(model_and_demos, n_obs):
     model, demos, _ = model_and_demos
+    if n_obs != model.n_observed_:
+        demos = mixture_demos(seed=1, n_obs=n_obs)[0]
+        model = MixtureIProMP(3, n_basis=8).fit(demos)
     est = OnlineEstimator(model, n_alpha=12, min_interval=0.0)
     demo = demos[4]
     idx = np.arange(0, int(0.7 * len(demo.t)), 4)
