@@ -31,8 +31,7 @@ def basis_rows(z, centers, width):
     return out
 
 
-# nogil: other threads of the process (the simulator, the observer) run during the update.
-@numba.njit(cache=True, fastmath=False, boundscheck=False, nogil=True)
+@numba.njit(cache=True, fastmath=False, boundscheck=False)
 def kalman_update(sigma, mu, loglik, psi, psi_index, y, noise):
     """In place: sigma (H, d, d), mu (H, d), loglik (H,) += log N(y; H mu, H Sigma H^T + R).
 
