@@ -209,3 +209,21 @@ def test_mixture_rejects_bad_input(three_patterns):
         Demonstration([0.0, 0.0], np.zeros((2, 3)), np.zeros((2, 2)))
     with pytest.raises(RuntimeError, match='not fitted'):
         MixtureIProMP(2).component_posterior([1.0], np.zeros((1, 3)))
+
+
+def test_a_component_left_empty_keeps_a_finite_phase_prior():
+    """K = 8 on 47 box-assembly demonstrations: EM empties a component (0 / 0 gave NaN priors
+    and an all-NaN online posterior)."""
+    from mixture_ip_ros.core.online import OnlineEstimator
+    from mixture_ip_ros.data.scenarios import box_assembly
+    demos = [g.to_demonstration(0.01) for g in box_assembly(0, occlusion=0.5)]
+    m = MixtureIProMP(8).fit(demos[:1] + demos[2:])
+    empty = m.resp_.sum(axis=0) < 1e-12
+    assert empty.any()
+    alphas = np.array([1.0 / d.duration for d in demos[:1] + demos[2:]])
+    assert np.allclose(m.alpha_mean_[empty], alphas.mean())
+    assert np.all(np.isfinite(m.alpha_std_)) and np.all(m.alpha_std_ > 0)
+    est = OnlineEstimator(m)
+    est.update(0.1, demos[1].observed[10])
+    p = est.component_posterior()
+    assert np.all(np.isfinite(p)) and p.sum() == pytest.approx(1.0)

@@ -188,10 +188,14 @@ class MixtureIProMP:
         self.noise_var_ = noise
         alphas = np.array([1.0 / demo.duration for demo in demos])
         nk = resp.sum(axis=0)
-        self.alpha_mean_ = resp.T @ alphas / nk
-        var = np.array([resp[:, k] @ (alphas - self.alpha_mean_[k]) ** 2 / nk[k]
+        # A component EM left without members keeps the pooled phase prior (not 0 / 0).
+        empty = nk < 1e-12
+        nk = np.where(empty, 1.0, nk)
+        mean = np.where(empty, alphas.mean(), resp.T @ alphas / nk)
+        var = np.array([alphas.var() if empty[k] else resp[:, k] @ (alphas - mean[k]) ** 2 / nk[k]
                         for k in range(self.n_components)])
-        self.alpha_std_ = np.maximum(np.sqrt(var), self.min_alpha_rel_std * self.alpha_mean_)
+        self.alpha_mean_ = mean
+        self.alpha_std_ = np.maximum(np.sqrt(var), self.min_alpha_rel_std * mean)
         return self
 
     def _latent_e_step(self, stats, weights, means, covs, noise):
