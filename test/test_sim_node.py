@@ -180,6 +180,33 @@ def test_runs_as_an_executable_with_ros_args(ros_context):
     assert code == 0
 
 
+
+def test_ctrl_c_while_simulating_flat_out_exits_cleanly():
+    """At real_time_factor 0 the node is nearly always inside a callback when SIGINT shuts the
+    context down. Started as a shell's background job (SIGINT ignored until rclpy installs its
+    handler, so no KeyboardInterrupt), that ended in an RCLError traceback and exit code 1."""
+    env = dict(os.environ, ROS_DOMAIN_ID=str(private_domain_id()))
+    for _ in range(3):
+        proc = subprocess.Popen(
+            [sys.executable, '-m', 'mixture_ip_ros.nodes.sim_node', '--ros-args',
+             '--params-file', str(config_path('sim.yaml')), '-p', 'real_time_factor:=0.0'],
+            env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+        out = b''
+        try:
+            deadline = time.monotonic() + 20
+            while b'iiwa sim' not in out and time.monotonic() < deadline:   # started up
+                out += proc.stdout.readline()
+            time.sleep(1.0)
+            proc.send_signal(signal.SIGINT)
+            out += proc.communicate(timeout=10)[0]
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+        text = out.decode(errors='replace')
+        assert proc.returncode == 0 and 'Traceback' not in text, text
+
 def test_wall_clock_mode_stamps_ros_time_and_maps_trajectory_stamps(ros_context):
     h = Harness(ros_context, simulated_time=False)
     try:

@@ -24,7 +24,6 @@ import time
 
 import rclpy
 import rclpy.logging
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -33,6 +32,7 @@ from rosgraph_msgs.msg import Clock
 from builtin_interfaces.msg import Time
 
 from mixture_ip_ros.data.bags import BagError, read_messages
+from mixture_ip_ros.nodes.spinning import spin_until_shutdown
 
 
 def message_class(msgtype: str):
@@ -299,9 +299,8 @@ def main(args=None):
     try:
         node = BagPlayer()
         # Exit when the bag has been played (like `ros2 bag play`); spinning serves parameters.
-        while rclpy.ok() and not node.finished:
-            rclpy.spin_once(node, timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
+        spin_until_shutdown(node, done=lambda: node.finished)
+    except KeyboardInterrupt:
         pass
     except ValueError as exc:  # bad parameters or a bad bag (BagError)
         rclpy.logging.get_logger('bag_player').error(str(exc))

@@ -36,7 +36,6 @@ from nav_msgs.msg import Path
 import numpy as np
 import rclpy
 from rclpy.exceptions import NameValidationException, ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.logging import get_logger
 from rclpy.node import Node
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
@@ -47,6 +46,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.data.model_file import load_model
+from mixture_ip_ros.nodes.spinning import spin_until_shutdown
 from mixture_ip_ros.planning import InteractionPlanner, LatencyStats, summary_labels
 
 JOINT_NAMES = [f'iiwa_joint_{i}' for i in range(1, 8)]
@@ -458,9 +458,7 @@ def main(args=None):
         rclpy.try_shutdown()
         return 1
     try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        spin_until_shutdown(node)
     finally:
         node.destroy_node()
         rclpy.try_shutdown()

@@ -19,7 +19,6 @@ import time
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PointStamped, PoseStamped
 import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import (
     DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy)
@@ -28,6 +27,7 @@ from std_msgs.msg import Header
 from mixture_ip_ros.core.pose_validation import (
     check_pose, FrameTransform, ns_to_stamp, REJECT_REASONS)
 from mixture_ip_ros.core.segmentation import Event, InteractionGate, MotionSegmenter
+from mixture_ip_ros.nodes.spinning import spin_until_shutdown
 
 SEGMENTER_DEFAULTS = {name: p.default
                       for name, p in inspect.signature(MotionSegmenter).parameters.items()}
@@ -202,8 +202,8 @@ def main(args=None):
     node = None
     try:
         node = ObserverNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
+        spin_until_shutdown(node)
+    except KeyboardInterrupt:
         pass
     finally:
         if node is not None:

@@ -20,7 +20,6 @@ import rclpy
 from builtin_interfaces.msg import Time as TimeMsg
 from geometry_msgs.msg import PoseStamped
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
@@ -30,6 +29,7 @@ from trajectory_msgs.msg import JointTrajectory
 from mixture_ip_ros.robot.controller import DEFAULT_NATURAL_FREQUENCY
 from mixture_ip_ros.robot.sim import HOME, IiwaSimulation
 from mixture_ip_ros.robot.trajectory import TrajectoryPoint
+from mixture_ip_ros.nodes.spinning import spin_until_shutdown
 
 
 def _time_msg(seconds: float) -> TimeMsg:
@@ -46,7 +46,7 @@ class SimNode(Node):
     def __init__(self, **kwargs):
         super().__init__('sim_node', **kwargs)
         self.declare_parameter('simulated_time', True)
-        self.declare_parameter('real_time_factor', 0.0)
+        self.declare_parameter('real_time_factor', 1.0)
         self.declare_parameter('publish_rate', 100.0)
         self.declare_parameter('periods_per_callback', 1)
         self.declare_parameter('initial_positions', HOME.tolist())
@@ -202,8 +202,8 @@ def main(args=None):
     node = None
     try:
         node = SimNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
+        spin_until_shutdown(node)
+    except KeyboardInterrupt:
         pass
     finally:
         if node is not None:
