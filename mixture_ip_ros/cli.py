@@ -9,9 +9,9 @@ from pathlib import Path
 
 def _generate(args):
     from mixture_ip_ros.data.scenarios import write_scenario_bags
-    out = write_scenario_bags(args.scenario, Path(args.out), seed=args.seed,
-                              occlusion=args.occlusion, storage=args.storage)
-    print(f'wrote {args.scenario} demonstrations to {out}')
+    bags = write_scenario_bags(args.scenario, Path(args.out), seed=args.seed,
+                               occlusion=args.occlusion, storage=args.storage)
+    print(f'wrote {len(bags)} {args.scenario} demonstrations ({args.storage} bags) to {args.out}')
 
 
 def _train(args):
