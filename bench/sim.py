@@ -11,9 +11,10 @@ Prints one JSON object:
                        executor together with a JointState subscriber
   node_joint_state_hz_sim / _wall  JointState messages that subscriber received per simulated /
                        wall second; node_joint_state_max_gap_s the largest stamp gap between them
-  executable_*         the same for the sim_node executable in its own process (config/sim.yaml),
-                       observed from this process over DDS (a Python subscriber may drop some
-                       messages under load: then the rate is a lower bound)
+  executable_*         the same for the sim_node executable in its own process (config/sim.yaml
+                       with real_time_factor 0), observed from this process over DDS (a Python
+                       subscriber may drop some messages under load: then the rate is a lower
+                       bound)
 Run: .venv/bin/python bench/sim.py [--runs 5] [--seconds 2.0] [--node-seconds 3.0]
 """
 
@@ -171,7 +172,7 @@ def bench_executable(seconds: float):
     domain = 190 + os.getpid() % 40
     proc = subprocess.Popen(
         [sys.executable, '-m', 'mixture_ip_ros.nodes.sim_node', '--ros-args', '--params-file',
-         str(config_path('sim.yaml'))],
+         str(config_path('sim.yaml')), '-p', 'real_time_factor:=0.0'],
         env=dict(os.environ, ROS_DOMAIN_ID=str(domain)),
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     ctx, listener, executor, received = _ros_listener(domain)
