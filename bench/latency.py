@@ -66,7 +66,6 @@ import struct
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
@@ -76,7 +75,6 @@ os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 import numpy as np  # noqa: E402
 import rclpy  # noqa: E402
 from rclpy.context import Context  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile,  # noqa: E402
@@ -92,6 +90,7 @@ from mixture_ip_ros.core.segmentation import Event, InteractionGate, MotionSegme
 from mixture_ip_ros.data.scenarios import MOCAP_NOISE, box_assembly  # noqa: E402
 from mixture_ip_ros.nodes.estimator_node import EstimatorNode  # noqa: E402
 from mixture_ip_ros.nodes.observer_node import SEGMENTER_DEFAULTS, ObserverNode  # noqa: E402
+from mixture_ip_ros.nodes.spinning import spin_in_thread  # noqa: E402
 from mixture_ip_ros.paths import config_path  # noqa: E402
 from mixture_ip_ros.training import train_to_file  # noqa: E402
 
@@ -386,14 +385,8 @@ class InProcess:
             {**ESTIMATOR_PARAMS, 'model_path': str(model_path), **overrides}))
         self.probe = Probe(context=ctx)
         # One SingleThreadedExecutor per node in its own thread, as system.ClosedLoop.
-        self.executors = []
-        for n in (self.observer, self.estimator, self.probe):
-            ex = SingleThreadedExecutor(context=ctx)
-            ex.add_node(n)
-            self.executors.append(ex)
-        self.threads = [threading.Thread(target=ex.spin, daemon=True) for ex in self.executors]
-        for t in self.threads:
-            t.start()
+        self.executors, self.threads = zip(*(spin_in_thread(n) for n in (
+            self.observer, self.estimator, self.probe)))
 
     def caught_up(self):
         """Every published pose handled by the observer and each of its observations received
@@ -547,10 +540,7 @@ def run_cross_process(domain, model_path, warm_demo, stream, logdir, overrides):
         rclpy.init(context=ctx, domain_id=domain)
         try:
             probe = Probe(diagnostics=True, context=ctx)
-            ex = SingleThreadedExecutor(context=ctx)
-            ex.add_node(probe)
-            th = threading.Thread(target=ex.spin, daemon=True)
-            th.start()
+            ex, th = spin_in_thread(probe)
             try:
                 t0 = time.monotonic()
                 # Matched with the probe, the estimator spinning (diagnostics), and the

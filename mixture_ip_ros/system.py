@@ -7,14 +7,12 @@ recorded time (stamps rewritten to that time). Used by ``mixture-ip demo`` and t
 tests.
 """
 
-import threading
 import time
 from pathlib import Path
 
 import numpy as np
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -23,6 +21,7 @@ from mixture_ip_ros.nodes.estimator_node import EstimatorNode
 from mixture_ip_ros.nodes.observer_node import ObserverNode
 from mixture_ip_ros.nodes.recorder import InteractionRecorder
 from mixture_ip_ros.nodes.sim_node import SimNode
+from mixture_ip_ros.nodes.spinning import spin_in_thread
 from mixture_ip_ros.record import InteractionRecord
 from mixture_ip_ros.robot.kinematics import IiwaKinematics
 
@@ -52,11 +51,8 @@ class ClosedLoop:
                                                         10)
         self.kinematics = IiwaKinematics()
         self.wrist_topic = self.observer.get_parameter('wrist_topic').value
-        # One single-threaded executor per node, each in its own thread: a node waiting for the
-        # GIL never holds up another's queue (one MultiThreadedExecutor lagged by up to 0.5 s).
-        self._spinning = {}
-        for node in (self.sim, self.observer, self.estimator, self.recorder):
-            self._spin(node)
+        self._spinning = {node: spin_in_thread(node)
+                          for node in (self.sim, self.observer, self.estimator, self.recorder)}
         self.labels = (self.estimator.metadata.get('component_labels')
                        or [f'component_{k}' for k in range(self.estimator.model.n_components)])
 
@@ -95,7 +91,7 @@ class ClosedLoop:
             Parameter('use_sim_time', value=True)] + _params(
             {'bag': str(bag), 'rewrite_stamps': True, 'topics': [self.wrist_topic],
              **(extra_params or {})}))
-        self._spin(player)
+        self._spinning[player] = spin_in_thread(player)
         try:
             if not player.wait_until_finished(timeout):
                 raise TimeoutError(f'playing {bag} did not finish within {timeout} s')
@@ -140,13 +136,6 @@ class ClosedLoop:
         for node in nodes:
             node.destroy_node()
         rclpy.try_shutdown(context=self.context)
-
-    def _spin(self, node):
-        executor = SingleThreadedExecutor(context=self.context)
-        executor.add_node(node)
-        thread = threading.Thread(target=executor.spin, daemon=True)
-        thread.start()
-        self._spinning[node] = (executor, thread)
 
     def _stop(self, node):
         executor, thread = self._spinning.pop(node)

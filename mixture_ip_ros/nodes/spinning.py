@@ -1,4 +1,6 @@
-"""Spinning a node executable until Ctrl-C or shutdown."""
+"""Spinning nodes: an executable until Ctrl-C or shutdown, or a node in a thread of its own."""
+
+import threading
 
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
@@ -23,3 +25,14 @@ def spin_until_shutdown(node, done=None) -> None:
             raise
     finally:
         executor.shutdown(timeout_sec=0)
+
+
+def spin_in_thread(node):
+    """Spin ``node`` with its own SingleThreadedExecutor in a daemon thread; returns (executor,
+    thread). One executor per node: on 2 cores, one MultiThreadedExecutor for several nodes
+    slowed an in-process simulation to 0.1-0.25x real time."""
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    thread = threading.Thread(target=executor.spin, daemon=True)
+    thread.start()
+    return executor, thread
