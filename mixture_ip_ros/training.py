@@ -6,7 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mixture_ip_ros.core.mixture import (MixtureIProMP, controlled_rms, select_n_components)
+from mixture_ip_ros.core.mixture import (MixtureIProMP, loo_rms_by_components,
+                                         select_n_components)
 from mixture_ip_ros.data.model_file import save_model
 
 logger = logging.getLogger(__name__)
@@ -24,14 +25,7 @@ def choose_n_components(demos, candidates, progress=None, **params):
     candidates = [int(k) for k in candidates if k <= len(demos) - 1]
     if not candidates:
         raise ValueError('not enough demonstrations for leave-one-out')
-    rms = np.empty((len(candidates), len(demos)))
-    total = rms.size
-    for a, K in enumerate(candidates):
-        for i, test in enumerate(demos):
-            model = MixtureIProMP(n_components=K, **params).fit(demos[:i] + demos[i + 1:])
-            rms[a, i] = controlled_rms(model, test, 'final')
-            if progress:
-                progress(a * len(demos) + i + 1, total, K)
+    rms = loo_rms_by_components(demos, candidates, 'final', progress, **params)
     return candidates[select_n_components(rms)], rms
 
 

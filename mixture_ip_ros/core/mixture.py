@@ -192,8 +192,8 @@ class MixtureIProMP:
         empty = nk < 1e-12
         nk = np.where(empty, 1.0, nk)
         mean = np.where(empty, alphas.mean(), resp.T @ alphas / nk)
-        var = np.array([alphas.var() if empty[k] else resp[:, k] @ (alphas - mean[k]) ** 2 / nk[k]
-                        for k in range(self.n_components)])
+        var = np.where(empty, alphas.var(),
+                       np.einsum('ik,ik->k', resp, (alphas[:, None] - mean) ** 2) / nk)
         self.alpha_mean_ = mean
         self.alpha_std_ = np.maximum(np.sqrt(var), self.min_alpha_rel_std * mean)
         return self
@@ -260,10 +260,12 @@ class MixtureIProMP:
             raise RuntimeError('this MixtureIProMP is not fitted yet; call fit() first')
 
 
-def loo_rms_by_components(demonstrations, candidates, observe: str = 'final', **params):
+def loo_rms_by_components(demonstrations, candidates, observe: str = 'final', progress=None,
+                          **params):
     """Leave-one-out RMS error of the controlled agent's predicted mean trajectory (thesis Figs.
     8 and 10) for every K in ``candidates``. The held-out demonstration is observed at its final
     wrist position (``observe='final'``, as in the thesis) or along its whole path ('full').
+    ``progress(done, total, K)`` is called after each fit.
 
     Returns an array (len(candidates), n) of per-demonstration RMS errors.
     """
@@ -273,6 +275,8 @@ def loo_rms_by_components(demonstrations, candidates, observe: str = 'final', **
         for i, test in enumerate(demos):
             model = MixtureIProMP(n_components=K, **params).fit(demos[:i] + demos[i + 1:])
             out[a, i] = controlled_rms(model, test, observe)
+            if progress:
+                progress(a * len(demos) + i + 1, out.size, K)
     return out
 
 
