@@ -56,12 +56,11 @@ def should_commit(component_posterior, n_observations: int, confidence_threshold
 
 @dataclass(frozen=True)
 class Plan:
-    """Robot plan and predicted wrist movement under one hypothesis (component, alpha).
+    """Robot plan under one hypothesis (component, alpha).
 
     times (n,) s since onset (time_from_start); phases (n,); positions, velocities,
-    accelerations (n, Q) in joint order of the model. wrist_times, wrist_phases (m,) and
-    wrist_positions (m, P): the whole predicted human movement, phases 0..1.
-    final: the human is at rest (single point at the final posture).
+    accelerations (n, Q) in joint order of the model. final: the human is at rest (single
+    point at the final posture).
     """
 
     times: np.ndarray
@@ -69,19 +68,15 @@ class Plan:
     positions: np.ndarray
     velocities: np.ndarray
     accelerations: np.ndarray
-    wrist_times: np.ndarray
-    wrist_phases: np.ndarray
-    wrist_positions: np.ndarray
     component: int
     alpha: float
     final: bool
 
 
 def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float = 0.1,
-               settle_time: float = 0.5, n_wrist_points: Optional[int] = None,
-               component: Optional[int] = None, alpha: Optional[float] = None,
-               final_time: Optional[float] = None, robot_q=None,
-               catch_up_velocity=None, final_position=None) -> Plan:
+               settle_time: float = 0.5, component: Optional[int] = None,
+               alpha: Optional[float] = None, final_time: Optional[float] = None,
+               robot_q=None, catch_up_velocity=None, final_position=None) -> Plan:
     """The plan from ``t_now`` (s since onset) on, for (component, alpha) (default: the MAP).
 
     ``final_time``: when the human is at rest, the time of the final point if it is at least
@@ -98,9 +93,11 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
         raise ValueError(f'n_points must be >= 2, got {n_points}')
     if not np.isfinite(t_now) or t_now < 0:
         raise ValueError(f't_now must be finite and >= 0, got {t_now}')
-    k_map, a_map = estimator.map_hypothesis()
-    k = k_map if component is None else int(component)
-    a = a_map if alpha is None else float(alpha)
+    if component is None or alpha is None:
+        k_map, a_map = estimator.map_hypothesis()
+        component = k_map if component is None else component
+        alpha = a_map if alpha is None else alpha
+    a = float(alpha)
     z_start = a * (t_now + lookahead)
     final = final_position is not None or z_start >= 1.0 - PHASE_EPS
     if final:
@@ -111,54 +108,52 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
     else:
         phases = np.linspace(z_start, 1.0, n_points)
         times = phases / a
-    m = n_points if n_wrist_points is None else int(n_wrist_points)
-    wrist_phases = np.linspace(0.0, 1.0, m)
-    pred = estimator.predict(np.concatenate([phases, wrist_phases]), component=k, alpha=a,
-                             covariance=False)
-    a = pred['alpha']   # the grid value actually used (identical when a came from the grid)
-    n = len(phases)
-    ctrl = pred['controlled']
-    vel = ctrl['velocity'][:n].copy()
-    acc = ctrl['acceleration'][:n].copy()
+    # a: the grid value actually used (identical when it came from the grid)
+    k, a, (pos, vel, acc), _ = estimator.mean_trajectories(phases, component=component, alpha=a)
     vel[-1] = 0.0
     acc[-1] = 0.0
-    pos = ctrl['position'][:n].copy()
     if final_position is not None:
         pos[-1] = estimator.predict_at_rest(final_position, component=k)[0]
     if robot_q is not None and catch_up_velocity is not None:
         reachable_at = t_now + np.max(np.abs(pos - np.asarray(robot_q))
                                       / np.asarray(catch_up_velocity), axis=1)
         ok = np.flatnonzero(times >= reachable_at)
-        first = ok[0] if ok.size else n - 1
+        first = ok[0] if ok.size else len(times) - 1
         times = times.copy()
         times[first] = max(times[first], reachable_at[first])
-        phases, times, pos, vel, acc = (a[first:] for a in (phases, times, pos, vel, acc))
-    return Plan(times=times, phases=phases, positions=pos,
-                velocities=vel, accelerations=acc,
-                wrist_times=wrist_phases / a, wrist_phases=wrist_phases,
-                wrist_positions=pred['observed']['position'][n:].copy(),
-                component=int(pred['component']), alpha=float(a), final=bool(final))
+        phases, times, pos, vel, acc = (x[first:] for x in (phases, times, pos, vel, acc))
+    return Plan(times=times, phases=phases, positions=pos, velocities=vel, accelerations=acc,
+                component=k, alpha=a, final=bool(final))
+
+
+def predicted_wrist(estimator, plan: Plan, n_points: int):
+    """The whole predicted human movement under the plan's hypothesis: times (s since onset)
+    and positions (n_points, P) at phases evenly spaced over 0..1."""
+    phases = np.linspace(0.0, 1.0, n_points)
+    _, a, _, positions = estimator.mean_trajectories((), phases, component=plan.component,
+                                                     alpha=plan.alpha)
+    return phases / a, positions
 
 
 def check_plan(plan: Plan) -> Optional[str]:
     """Why the plan must not be published (None if it may): non-finite values, times not
     strictly increasing at nanosecond resolution, motion at the last point."""
-    for name in ('times', 'positions', 'velocities', 'accelerations', 'wrist_times',
-                 'wrist_positions'):
-        if not np.all(np.isfinite(getattr(plan, name))):
+    for name in ('times', 'positions', 'velocities', 'accelerations'):
+        if not np.isfinite(getattr(plan, name)).all():
             return f'non-finite {name}'
     ns = np.round(plan.times * 1e9)
-    if ns[0] < 0 or np.any(np.diff(ns) <= 0):
+    if ns[0] < 0 or (ns[1:] <= ns[:-1]).any():
         return 'times not strictly increasing (or negative)'
-    if np.any(plan.velocities[-1] != 0) or np.any(plan.accelerations[-1] != 0):
+    if plan.velocities[-1].any() or plan.accelerations[-1].any():
         return 'last point not at rest'
     return None
 
 
 @dataclass
 class Step:
-    """What one replan produced: always the posterior summary and the plan (for the path);
-    ``send`` says whether the joint trajectory goes out. ``problem`` is check_plan's reason."""
+    """What one replan produced: always the posterior summary and the plan (the predicted
+    path follows its hypothesis); ``send`` says whether the joint trajectory goes out.
+    ``problem`` is check_plan's reason."""
 
     summary: np.ndarray
     plan: Optional[Plan]

@@ -74,6 +74,42 @@ def test_prediction_equals_conditioning_the_map_hypothesis(model_and_demos):
     assert out['component'] == k and out['alpha'] == a
 
 
+def test_mean_trajectories_equal_predict_for_every_hypothesis(model_and_demos):
+    """The compiled means for robot commands against predict (numpy, GaussianBasis.evaluate),
+    phases outside [0, 1] included (basis held, derivatives zero there)."""
+    model, demos, _ = model_and_demos
+    est = OnlineEstimator(model, n_alpha=12, min_interval=0.0)
+    demo = demos[7]
+    for i in range(0, len(demo.t) // 2, 6):
+        est.update(demo.t[i], demo.observed[i])
+    z_c = np.concatenate([[-0.2, 0.0], np.sort(np.random.default_rng(0).uniform(0, 1, 17)),
+                          [1.0, 1.3]])
+    z_o = np.linspace(-0.1, 1.1, 9)
+    for component, alpha in ((None, None), (0, None), (2, est.alphas[3]), (None, 0.77)):
+        k, a, (pos, vel, acc), wrist = est.mean_trajectories(z_c, z_o, component, alpha)
+        ref = est.predict(z_c, component=component, alpha=alpha, covariance=False)
+        assert (k, a) == (ref['component'], ref['alpha'])
+        for key, got in zip(('position', 'velocity', 'acceleration'), (pos, vel, acc)):
+            assert np.allclose(got, ref['controlled'][key], rtol=1e-12, atol=1e-12), key
+        assert not vel[0].any() and not acc[-1].any()        # z = -0.2 and z = 1.3
+        assert np.allclose(wrist, est.predict(z_o, component=component, alpha=alpha)
+                           ['observed']['position'], rtol=1e-12, atol=1e-12)
+
+
+def test_posterior_follows_every_update(model_and_demos):
+    """The joint posterior is computed once per update: it must change with each one."""
+    model, demos, _ = model_and_demos
+    est = OnlineEstimator(model, n_alpha=12, min_interval=0.0)
+    before = est.joint_posterior().copy()
+    est.update(demos[3].t[5], demos[3].observed[5])
+    after = est.joint_posterior()
+    lp = est._log_prior + est.log_evidence_flat
+    assert not np.allclose(before, after)
+    assert np.allclose(after.ravel(), np.exp(lp - lp.max()) / np.exp(lp - lp.max()).sum())
+    est.reset()
+    assert np.allclose(est.joint_posterior(), before)
+
+
 def test_online_selects_true_pattern_and_resets(model_and_demos):
     model, demos, labels = model_and_demos
     est = OnlineEstimator(model, n_alpha=20)

@@ -8,7 +8,7 @@ from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.data.model_file import load_model
 from mixture_ip_ros.planning import (
     InteractionPlanner, LatencyStats, Plan, build_plan, check_plan, posterior_summary,
-    should_commit, summary_labels)
+    predicted_wrist, should_commit, summary_labels)
 from mixture_ip_ros.training import train_to_file
 
 from synthetic import mixture_demos
@@ -78,9 +78,11 @@ def test_plan_follows_the_map_prediction_from_now_to_the_end(trained):
                        atol=1e-12)
     assert not plan.velocities[-1].any() and not plan.accelerations[-1].any()
     # the whole predicted wrist movement, phases 0..1
-    assert np.allclose(plan.wrist_phases, np.linspace(0, 1, 25))
-    assert np.allclose(plan.wrist_times, plan.wrist_phases / alpha)
-    assert np.allclose(plan.wrist_positions, est.predict(plan.wrist_phases)['observed']['position'])
+    times, wrist = predicted_wrist(est, plan, 25)
+    z = np.linspace(0, 1, 25)
+    assert np.allclose(times, z / alpha, rtol=0, atol=1e-12)
+    assert np.allclose(wrist, ref_wrist := est.predict(z)['observed']['position'], atol=1e-12)
+    assert ref_wrist.shape == (25, 3)
 
 
 def test_plan_velocities_are_time_derivatives_of_positions(trained):
@@ -128,9 +130,9 @@ def test_check_plan_refuses_nan_non_increasing_times_and_motion_at_the_end(train
     pos = good.positions.copy()
     pos[2, 3] = np.nan
     assert 'positions' in check_plan(changed(positions=pos))
-    wrist = good.wrist_positions.copy()
-    wrist[0, 0] = np.inf
-    assert 'wrist_positions' in check_plan(changed(wrist_positions=wrist))
+    acc = good.accelerations.copy()
+    acc[0, 0] = np.inf
+    assert 'accelerations' in check_plan(changed(accelerations=acc))
     times = good.times.copy()
     times[3] = times[2]
     assert 'increasing' in check_plan(changed(times=times))

@@ -1,4 +1,5 @@
-"""Compiled inner loop of the online estimator: one observation, every hypothesis.
+"""Compiled inner loops of the online estimator: one observation, every hypothesis
+(kalman_update), and the mean trajectory that a robot command needs (mean_trajectory).
 
 Per hypothesis h the observed-agent weights have N(mu[h], sigma[h]); the observation
 y = (I_P kron psi_h^T) w + e, e ~ N(0, diag(noise)). The update factors S = L L^T (P x P) and
@@ -115,3 +116,41 @@ def kalman_update(sigma, mu, loglik, psi, psi_index, y, noise):
                 ga, gb, gc = Ga[i], Gb[i], Gc[i]
                 for j in range(d):
                     Si[j] -= ga * Ga[j] + gb * Gb[j] + gc * Gc[j]
+
+
+@numba.njit(cache=True, fastmath=False, boundscheck=False)
+def mean_trajectory(W, z, centers, width, alpha):
+    """Mean positions, velocities, accelerations (len(z), n) of the DOFs with weights W (n, N)
+    at phases z for the phase speed alpha: eqs. 1-3 with GaussianBasis.evaluate's basis and its
+    clamping (psi held, derivatives zero outside [0, 1]), in one pass without temporaries."""
+    T, N, n = z.shape[0], centers.shape[0], W.shape[0]
+    pos = np.zeros((T, n))
+    vel = np.zeros((T, n))
+    acc = np.zeros((T, n))
+    h = width * width
+    b = np.empty(N)
+    db = np.empty(N)
+    ddb = np.empty(N)
+    for t in range(T):
+        inside = 0.0 <= z[t] <= 1.0
+        zc = min(max(z[t], 0.0), 1.0)
+        s = ds = dds = 0.0
+        for i in range(N):
+            d = zc - centers[i]
+            b[i] = np.exp(-0.5 * d * d / h)
+            db[i] = -b[i] * d / h
+            ddb[i] = b[i] * (d * d / (h * h) - 1.0 / h)
+            s += b[i]
+            ds += db[i]
+            dds += ddb[i]
+        for i in range(N):
+            psi = b[i] / s
+            for j in range(n):
+                pos[t, j] += psi * W[j, i]
+            if inside:
+                dpsi = (db[i] - psi * ds) / s
+                ddpsi = (ddb[i] - 2.0 * dpsi * ds - psi * dds) / s
+                for j in range(n):
+                    vel[t, j] += alpha * dpsi * W[j, i]
+                    acc[t, j] += alpha * alpha * ddpsi * W[j, i]
+    return pos, vel, acc

@@ -12,7 +12,7 @@ on the observed weights alone, w_c | D follows from w_o | D through B_k = Sigma_
 import numpy as np
 from scipy import linalg
 
-from ._kalman import basis_rows, kalman_update
+from ._kalman import basis_rows, kalman_update, mean_trajectory
 from .interaction import trajectory_distribution
 from .phase import alpha_grid, alpha_log_prior
 
@@ -59,6 +59,7 @@ class OnlineEstimator:
         self.log_evidence_flat = np.zeros(len(self._mu0))
         self.n_observations = 0
         self.t_last = None
+        self._joint = None      # p(k, alpha_m | D), computed once per update
 
     def update(self, t: float, y) -> bool:
         """Add the observed agent's position ``y`` (P,) at ``t`` seconds after onset.
@@ -83,6 +84,7 @@ class OnlineEstimator:
                       self._noise)
         self.t_last = float(t)
         self.n_observations += 1
+        self._joint = None
         return True
 
     # ------------------------------------------------------------------ queries
@@ -92,10 +94,13 @@ class OnlineEstimator:
         return self.log_evidence_flat.reshape(self.n_components, -1)
 
     def joint_posterior(self):
-        """p(k, alpha_m | D), shape (K, M)."""
-        lp = self._log_prior + self.log_evidence_flat
-        p = np.exp(lp - lp.max())
-        return (p / p.sum()).reshape(self.n_components, -1)
+        """p(k, alpha_m | D), shape (K, M) (read-only)."""
+        if self._joint is None:
+            lp = self._log_prior + self.log_evidence_flat
+            p = np.exp(lp - lp.max())
+            self._joint = (p / p.sum()).reshape(self.n_components, -1)
+            self._joint.flags.writeable = False
+        return self._joint
 
     def component_posterior(self):
         """p(k | D) (eq. 11 with the phase marginalised)."""
@@ -107,9 +112,24 @@ class OnlineEstimator:
 
     def map_hypothesis(self):
         """(k*, alpha*): the most probable component (eq. 12) and, for it, the MAP alpha (eq. 20)."""
+        k, m = self._map_indices()
+        return k, float(self.alphas[m])
+
+    def _map_indices(self):
         joint = self.joint_posterior()
         k = int(np.argmax(joint.sum(axis=1)))
-        return k, float(self.alphas[int(np.argmax(joint[k]))])
+        return k, int(np.argmax(joint[k]))
+
+    def _hypothesis(self, component, alpha):
+        """Indices (k, m) of (component, the grid alpha nearest ``alpha``), MAP where None."""
+        if component is None or alpha is None:
+            k_map, m_map = self._map_indices()
+            if component is None:
+                component = k_map
+            if alpha is None:
+                return int(component), (m_map if component == k_map else
+                                        int(np.argmax(self.joint_posterior()[component])))
+        return int(component), int(np.argmin(np.abs(self.alphas - alpha)))
 
     def phase(self, t=None):
         """Current phase z = alpha* t under the MAP hypothesis, clamped to [0, 1]."""
@@ -130,12 +150,7 @@ class OnlineEstimator:
         and 'observed', each a dict of 'position', 'velocity', 'acceleration' (len, n) and
         'position_cov' (len, n, n) (omitted with ``covariance=False``).
         """
-        k_map, a_map = self.map_hypothesis()
-        k = k_map if component is None else int(component)
-        if alpha is None:
-            m = int(np.argmax(self.joint_posterior()[k]))
-        else:
-            m = int(np.argmin(np.abs(self.alphas - alpha)))
+        k, m = self._hypothesis(component, alpha)
         a = float(self.alphas[m])
         mu_o, sig_o = self.observed_weights(k, m)
         do = mu_o.shape[0]
@@ -152,6 +167,24 @@ class OnlineEstimator:
                                       z_grid, a)
         return {'time': z_grid / a, 'component': k, 'alpha': a, 'controlled': ctrl,
                 'observed': obs}
+
+    def mean_trajectories(self, z_controlled, z_observed=(), component=None, alpha=None):
+        """The means of :meth:`predict` without its covariances, for robot commands: (k, alpha,
+        controlled (position, velocity, acceleration) at phases ``z_controlled``, observed
+        positions at ``z_observed``). Same defaults and grid snapping as predict."""
+        k, m = self._hypothesis(component, alpha)
+        a = float(self.alphas[m])
+        basis = self.model.basis_
+        mu_o = self.mu[k * len(self.alphas) + m]
+        prior_mean = self.model.means_[k]
+        do = mu_o.shape[0]
+        mean_c = prior_mean[do:] + self._gain[k] @ (mu_o - prior_mean[:do])
+        controlled = mean_trajectory(mean_c.reshape(-1, self.n_basis),
+                                     np.asarray(z_controlled, dtype=float), basis.centers,
+                                     basis.width, a)
+        z_o = np.asarray(z_observed, dtype=float)
+        observed = basis_rows(z_o, basis.centers, basis.width) @ mu_o.reshape(-1, self.n_basis).T
+        return k, a, controlled, observed
 
     def predict_at_rest(self, y_final, component=None):
         """The controlled agent's final posture once the movement has ended: eq. 13 with D the

@@ -29,9 +29,8 @@ from main) without a valid model whose joints, observed DOFs and frame match the
 import sys
 import time
 
-from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import PointStamped, PoseStamped
+from geometry_msgs.msg import PointStamped
 from nav_msgs.msg import Path
 import numpy as np
 import rclpy
@@ -42,12 +41,14 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityP
                        qos_profile_sensor_data)
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Header, MultiArrayDimension
-from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from trajectory_msgs.msg import JointTrajectory
 
 from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.data.model_file import load_model
+from mixture_ip_ros.nodes.cdr import JointTrajectoryEncoder, PathEncoder
 from mixture_ip_ros.nodes.spinning import spin_until_shutdown
-from mixture_ip_ros.planning import InteractionPlanner, LatencyStats, summary_labels
+from mixture_ip_ros.planning import (
+    InteractionPlanner, LatencyStats, predicted_wrist, summary_labels)
 
 JOINT_NAMES = [f'iiwa_joint_{i}' for i in range(1, 8)]
 N_OBSERVED = 3   # a PointStamped carries x, y, z
@@ -55,16 +56,6 @@ N_OBSERVED = 3   # a PointStamped carries x, y, z
 
 def _stamp_ns(stamp) -> int:
     return stamp.sec * 1_000_000_000 + stamp.nanosec
-
-
-def _time_msg(ns: int) -> Time:
-    sec, nanosec = divmod(int(ns), 1_000_000_000)
-    return Time(sec=sec, nanosec=nanosec)
-
-
-def _duration_msg(seconds: float) -> Duration:
-    sec, nanosec = divmod(int(round(seconds * 1e9)), 1_000_000_000)
-    return Duration(sec=sec, nanosec=nanosec)
 
 
 class EstimatorNode(Node):
@@ -149,6 +140,8 @@ class EstimatorNode(Node):
         self.events = {'onset': 0, 'end': 0, 'gap': 0, 'unknown': 0}
         self._diag_seen = (0, 0)   # rejections and plan failures at the last diagnostics
         self._labels = ','.join(summary_labels(model.n_components))
+        self._trajectory_encoder = JointTrajectoryEncoder(self.joint_names)
+        self._path_encoder = PathEncoder(self.observed_frame)
 
         def reliable(depth):
             return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=int(depth),
@@ -203,6 +196,7 @@ class EstimatorNode(Node):
         # First update compiles the numba kernel (cached on disk); do it now, not mid-reach.
         self.estimator.update(0.0, np.zeros(self.estimator.n_observed))
         self.estimator.predict(np.linspace(0.0, 1.0, 3))
+        self.estimator.mean_trajectories([0.5], [0.5])
         self.estimator.reset()
 
     @property
@@ -302,15 +296,18 @@ class EstimatorNode(Node):
             return
         onset_ns = self.planner.onset_ns
         plan = step.plan if step.problem is None else None
-        # The robot's trajectory first: it is what the latency is about.
+        # The robot's trajectory first, serialized directly (nodes.cdr): it is what the
+        # latency is about; the posterior and the predicted path follow.
         if plan is not None and step.send:
-            self._traj_pub.publish(self._trajectory_msg(plan, onset_ns))
+            self._traj_pub.publish(self._trajectory_encoder.encode(
+                onset_ns, np.round(plan.times * 1e9).astype(np.int64), plan.positions,
+                plan.velocities, plan.accelerations))
         self._post_pub.publish(self._posterior_msg(step.summary))
         if plan is None:
             self.get_logger().error(f'plan not published: {step.problem}',
                                     throttle_duration_sec=self._throttle)
             return
-        self._path_pub.publish(self._path_msg(plan, onset_ns))
+        self._publish_path(plan, onset_ns)
         if step.send:
             rec = self.planner.current
             if step.committed_now:
@@ -325,33 +322,16 @@ class EstimatorNode(Node):
                     f"{self._label(plan.component)} at phase {rec['phase']:.3f}")
         self.plan_latency.add(time.perf_counter() - t0)
 
-    def _trajectory_msg(self, plan, onset_ns) -> JointTrajectory:
-        msg = JointTrajectory()
-        msg.header.stamp = _time_msg(onset_ns)
-        msg.joint_names = self.joint_names
-        pos, vel, acc = plan.positions.tolist(), plan.velocities.tolist(), \
-            plan.accelerations.tolist()
-        msg.points = [JointTrajectoryPoint(positions=pos[i], velocities=vel[i],
-                                           accelerations=acc[i],
-                                           time_from_start=_duration_msg(t))
-                      for i, t in enumerate(plan.times.tolist())]
-        return msg
-
-    def _path_msg(self, plan, onset_ns) -> Path:
-        msg = Path()
-        msg.header.frame_id = self.observed_frame
-        msg.header.stamp = _time_msg(onset_ns + round(self.planner.t_now * 1e9))
-        poses = []
-        for t, (x, y, z) in zip(plan.wrist_times.tolist(), plan.wrist_positions.tolist()):
-            pose = PoseStamped()
-            pose.header.frame_id = self.observed_frame
-            pose.header.stamp = _time_msg(onset_ns + round(t * 1e9))
-            position = pose.pose.position
-            position.x, position.y, position.z = x, y, z
-            pose.pose.orientation.w = 1.0
-            poses.append(pose)
-        msg.poses = poses
-        return msg
+    def _publish_path(self, plan, onset_ns) -> None:
+        """The whole predicted wrist movement under the plan's hypothesis (for RViz)."""
+        times, positions = predicted_wrist(self.estimator, plan, self.planner.n_points)
+        if not np.isfinite(positions).all():
+            self.get_logger().error('predicted wrist path not published: non-finite',
+                                    throttle_duration_sec=self._throttle)
+            return
+        self._path_pub.publish(self._path_encoder.encode(
+            onset_ns + round(self.planner.t_now * 1e9),
+            onset_ns + np.round(times * 1e9).astype(np.int64), positions))
 
     def _posterior_msg(self, summary) -> Float64MultiArray:
         msg = Float64MultiArray()

@@ -1,0 +1,88 @@
+"""nodes.cdr: the bytes it builds are the messages rclpy builds (oracle: rclpy's deserializer
+and message equality), for every length and alignment the templates meet."""
+
+from builtin_interfaces.msg import Duration, Time
+from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import Path
+import numpy as np
+import pytest
+from rclpy.serialization import deserialize_message
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from mixture_ip_ros.nodes.cdr import JointTrajectoryEncoder, PathEncoder
+
+NS = 1_000_000_000
+
+
+def _time(ns):
+    return Time(sec=int(ns) // NS, nanosec=int(ns) % NS)
+
+
+def _reference_trajectory(names, frame, stamp_ns, times_ns, pos, vel, acc):
+    msg = JointTrajectory()
+    msg.header.stamp = _time(stamp_ns)
+    msg.header.frame_id = frame
+    msg.joint_names = names
+    msg.points = [JointTrajectoryPoint(
+        positions=pos[i].tolist(), velocities=vel[i].tolist(), accelerations=acc[i].tolist(),
+        time_from_start=Duration(sec=int(t) // NS, nanosec=int(t) % NS))
+        for i, t in enumerate(times_ns)]
+    return msg
+
+
+# Odd name and frame lengths shift every later field off 8-byte alignment.
+@pytest.mark.parametrize('names,frame', [
+    ([f'iiwa_joint_{i}' for i in range(1, 8)], ''),
+    (['a', 'bc', 'def'], 'base'),
+    (['shoulder'], 'x'),
+])
+@pytest.mark.parametrize('n', [1, 2, 3, 25])
+def test_joint_trajectory_matches_rclpy(names, frame, n):
+    rng = np.random.default_rng(n)
+    q = len(names)
+    pos, vel, acc = rng.normal(size=(3, n, q)) * [[[1.0]], [[1e-300]], [[1e300]]]
+    times_ns = np.cumsum(rng.integers(1, 3 * NS, n))
+    stamp_ns = 1_795_000_000 * NS + 123_456_789
+    enc = JointTrajectoryEncoder(names, frame)
+    data = enc.encode(stamp_ns, times_ns, pos, vel, acc)
+    ref = _reference_trajectory(names, frame, stamp_ns, times_ns, pos, vel, acc)
+    assert deserialize_message(data, JointTrajectory) == ref
+    # The cached template is reused, not stale.
+    assert enc.encode(stamp_ns, times_ns, pos, vel, acc) == data
+    again = enc.encode(stamp_ns + 1, times_ns + 7, -pos, vel, acc)
+    assert deserialize_message(again, JointTrajectory) == _reference_trajectory(
+        names, frame, stamp_ns + 1, times_ns + 7, -pos, vel, acc)
+
+
+def test_joint_trajectory_values_exact():
+    """Bit-exact doubles (NaN is never encoded: check_plan refuses it upstream)."""
+    enc = JointTrajectoryEncoder(['j'])
+    values = np.array([[0.1], [-0.0], [5e-324]])
+    msg = deserialize_message(enc.encode(0, [1, 2, NS + 3], values, 2 * values, 3 * values),
+                              JointTrajectory)
+    assert [p.positions[0] for p in msg.points] == values[:, 0].tolist()
+    assert np.signbit(msg.points[1].positions[0])
+    assert [(p.time_from_start.sec, p.time_from_start.nanosec) for p in msg.points] == [
+        (0, 1), (0, 2), (1, 3)]
+
+
+@pytest.mark.parametrize('frame', ['iiwa_link_0', 'w', ''])
+@pytest.mark.parametrize('n', [1, 2, 25])
+def test_path_matches_rclpy(frame, n):
+    rng = np.random.default_rng(n)
+    xyz = rng.normal(size=(n, 3))
+    stamp_ns = 1000 * NS + 5
+    stamps = stamp_ns + np.cumsum(rng.integers(1, NS, n))
+    ref = Path()
+    ref.header.stamp = _time(stamp_ns)
+    ref.header.frame_id = frame
+    for t, (x, y, z) in zip(stamps, xyz):
+        pose = PoseStamped()
+        pose.header.stamp = _time(t)
+        pose.header.frame_id = frame
+        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = x, y, z
+        pose.pose.orientation.w = 1.0
+        ref.poses.append(pose)
+    enc = PathEncoder(frame)
+    assert deserialize_message(enc.encode(stamp_ns, stamps, xyz), Path) == ref
+    assert deserialize_message(enc.encode(stamp_ns, stamps, xyz), Path) == ref
