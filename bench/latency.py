@@ -22,22 +22,23 @@ pairs with its i-th last path (read raw: only the stamp is parsed). Cross-check:
 several points, trigger = header.stamp + first time_from_start - lookahead (disagreements and
 unmatched trajectories are counted in trigger_mismatches). Per pose the first trajectory
 counts. The observer's segmentation is replayed offline on the published poses (core
-InteractionGate, same parameters) to know, per interaction:
-  * the pose that confirmed the onset: the observer then releases every held sample since the
-    back-dated onset in one burst; trajectories triggered by those are not samples
-    (n_backlog_trajectories); the confirming pose's own trajectory comes after the whole burst
-    was estimated and replanned (onset_ms_*);
-  * the pose that confirmed the end (the observer does not forward it, it sends 'end'): the
-    interaction's last trajectory (the end plan) is its sample.
-Trajectories replanned by the wall-clock timer rather than an observation callback (the
-node's rule is replayed offline) are counted apart (n_timer_trajectories).
+MotionSegmenter, same parameters) to know, per interaction:
+  * the pose that confirmed the onset: the estimator then absorbs the samples it held since the
+    back-dated onset, a slice per callback, and commits the robot only once they are in; a
+    trajectory replanned when the onset callback itself finished them is an onset sample
+    (onset_ms_*); trajectories triggered by earlier poses would be n_backlog_trajectories;
+  * the pose that confirmed the end: forwarded like every pose (its own replan is a sample),
+    then 'end' brings the final plan: the interaction's last trajectory (end_plan_ms_max).
+Trajectories whose trigger the node's replanning rule, replayed offline, does not name (the
+wall-clock timer, or the callback that finished the held samples when the rate would not
+have replanned) are counted apart (n_timer_trajectories).
 
 Keys (ms unless named otherwise):
   e2e_ms_median, e2e_ms_p99, e2e_ms_max   in-process: observer, estimator and probe nodes, each
                       spun by its own SingleThreadedExecutor in its own thread
   e2e_ms_p99_live     without the onset-confirming poses; e2e_ms_*_steady: only poses at least
                       STEADY_AFTER_S after the onset confirmation; e2e_ms_max_transient: the
-                      earlier ones (the onset burst and the catching up after it)
+                      earlier ones (absorbing the samples held before the onset)
   *_deployed          in-process with config/estimator.yaml unchanged (observations used every
                       min_interval, replans at replan_rate_hz): the poses that trigger a replan
   *_cross_process     observer_node and estimator_node executables as subprocesses (params
@@ -45,13 +46,11 @@ Keys (ms unless named otherwise):
   estimator_update_us_mean/max, estimator_plan_us_mean/max   the node's own LatencyStats (it
                       keeps last, mean and max, no median); *_cross_process: its last
                       /diagnostics (since start, warm-up included)
-  estimator_rejected* observations the estimator rejected, by reason (outside_interaction: an
-                      'end' event overtook observations still queued, see sustained_hz)
+  estimator_rejected* observations the estimator rejected, by reason
   sustained_hz        highest tried rate such that it and every lower one passed: no pose lost
                       (all accepted by the observer, none dropped), every observation the
-                      observer published received and none rejected by the estimator (an
-                      'end' event that overtakes queued observations gets them rejected as
-                      outside_interaction), >= 95 % of the rate published, lag bounded (see
+                      observer published received and none rejected by the estimator,
+                      >= 95 % of the rate published, lag bounded (see
                       sustained_mode); sustained_runs: per rate
   sustained_hz_replan_every_obs   the same with the latency overrides
 Run: .venv/bin/python bench/latency.py [--demos 4] [--rates 250,500,1000,2000]
@@ -86,7 +85,7 @@ from nav_msgs.msg import Path as PathMsg  # noqa: E402
 from trajectory_msgs.msg import JointTrajectory  # noqa: E402
 
 from mixture_ip_ros.core.pose_validation import FrameTransform  # noqa: E402
-from mixture_ip_ros.core.segmentation import Event, InteractionGate, MotionSegmenter  # noqa: E402
+from mixture_ip_ros.core.segmentation import MotionSegmenter  # noqa: E402
 from mixture_ip_ros.data.scenarios import MOCAP_NOISE, box_assembly  # noqa: E402
 from mixture_ip_ros.nodes.estimator_node import EstimatorNode  # noqa: E402
 from mixture_ip_ros.nodes.observer_node import SEGMENTER_DEFAULTS, ObserverNode  # noqa: E402
@@ -189,16 +188,16 @@ def segmentation_events(probe, stream):
     confirmed the end (None if none), from the observer's own gate replayed offline on every
     pose the probe published (same parameters; the observer's stream time is seconds since the
     first pose it accepted)."""
-    gate = InteractionGate(MotionSegmenter(
-        **{name: OBSERVER_PARAMS.get(name, d) for name, d in SEGMENTER_DEFAULTS.items()}))
+    seg = MotionSegmenter(
+        **{name: OBSERVER_PARAMS.get(name, d) for name, d in SEGMENTER_DEFAULTS.items()})
     tf = FrameTransform(OBSERVER_PARAMS['mocap_to_base_xyz'],
                         OBSERVER_PARAMS['mocap_to_base_xyzw'])
     t_ref = probe.published_stamps[0]
     events = []
     for ns, xyz in zip(probe.published_stamps, probe.published_xyz):
-        for item in gate.push((ns - t_ref) * 1e-9, tf.apply(*xyz), ns):
-            if isinstance(item, Event) and item.kind in ('onset', 'end'):
-                events.append((item.kind, ns))
+        for ev in seg.update((ns - t_ref) * 1e-9, tf.apply(*xyz)):
+            if ev.kind in ('onset', 'end'):
+                events.append((ev.kind, ns))
     out = []
     for lo, hi in stream.segments:
         s_lo, s_hi = stream.stamps[lo], stream.stamps[hi - 1]
@@ -316,7 +315,7 @@ def analyse(stream, probe, seg_events, est_params, skip=0):
         if len(P) < len(T):
             res['unmatched'] += len(T)
             continue
-        forwarded = [ns for ns in stream.stamps[lo:hi] if end_pose is None or ns < end_pose]
+        forwarded = [ns for ns in stream.stamps[lo:hi] if end_pose is None or ns <= end_pose]
         triggers = triggering_observations(forwarded, T[0][1], float(est_params['min_interval']),
                                            1.0 / float(est_params['replan_rate_hz']))
         seen = set()
@@ -324,20 +323,19 @@ def analyse(stream, probe, seg_events, est_params, skip=0):
             trig = path[1]
             if tr[3] > 1 and abs(tr[1] + tr[2] - lookahead_ns - trig) > 2000:
                 res['mismatch'] += 1
-            is_end = j == len(T) - 1 and end_pose is not None and trig < end_pose
-            if is_end:
-                trig = end_pose
             k = int(np.argmin(np.abs(stamps - trig)))
             if abs(int(stamps[k]) - trig) > 2000 or int(stamps[k]) not in probe.pub_times:
                 res['unmatched'] += 1
                 continue
             trig = int(stamps[k])
             lat = tr[0] - probe.pub_times[trig]
+            if j == len(T) - 1 and trig == end_pose:
+                res['end'].append(lat)      # the final plan, on 'end'
             if onset_pose is not None and trig < onset_pose:
                 res['backlog'] += 1
                 continue
-            if not is_end and trig not in triggers:
-                res['timer'].append(lat)    # replanned by the wall-clock timer
+            if trig not in triggers:
+                res['timer'].append(lat)
                 continue
             if trig in seen:
                 res['repeat'] += 1
@@ -351,8 +349,6 @@ def analyse(stream, probe, seg_events, est_params, skip=0):
                 res['onset'].append(lat)
             else:
                 res['live'].append(lat)
-            if is_end:
-                res['end'].append(lat)
     return res
 
 
@@ -485,7 +481,6 @@ def run_sustained(domain, model_path, warm, g, rates, overrides):
                 dropped = sum(ob.drop_counts.values()) - drop0
                 published_obs = ob.published['observations'] - obs0
                 received = es.received - rec0
-                # e.g. 'outside_interaction': the 'end' event overtook queued observations
                 rejected = sum(es.rejected.values()) - rej0
                 achieved = (n - 1) / (last - first) if last > first else float('nan')
                 drain_ms = None if done_at is None else (done_at - last) * 1e3
@@ -676,7 +671,7 @@ def main():
             f'observation lost, >= 95 % of the rate published, lag bounded: e2e p99 of the '
             f'poses >= {STEADY_AFTER_S:.0f} s after the onset confirmation <= '
             f'{LAG_BOUND_MS:.0f} ms and everything delivered within {LAG_BOUND_MS:.0f} ms of '
-            f'the last pose (the onset burst transient is reported, not judged)')
+            f'the last pose (the transient after an onset is reported, not judged)')
         result['sustained_runs'] = runs
         best, runs = run_sustained(domain, model_path, warm, g_sus, rates[:3], every_pose)
         result['sustained_hz_replan_every_obs'] = best

@@ -15,19 +15,21 @@ human is at rest) the plan is a single point: the predicted final posture, reach
 that time (while it is still ahead) so that the arrival does not recede with every replan.
 
 Commit (:func:`should_commit`): the first plan is sent once p(k* | D) >= ``confidence_threshold``
-with at least ``min_observations`` observations used; afterwards every replan is sent, also
+with at least ``min_observations`` observations used and none of the samples held before the
+onset still waiting to be absorbed; afterwards every replan is sent, also
 when k* changes (the controller blends from its current state into the new plan).
 """
 
 from collections import deque
 from dataclasses import dataclass
+import time
 from typing import Optional
 
 import numpy as np
 
 STATES = ('idle', 'observing', 'committed', 'done')
 # Why an observation was not used (beyond 'skipped': within min_interval of the last one used).
-REJECT_REASONS = ('wrong_frame', 'non_finite', 'outside_interaction', 'before_onset',
+REJECT_REASONS = ('wrong_frame', 'non_finite', 'before_onset',
                   'time_backwards', 'exception', 'bad_joint_state')
 PHASE_EPS = 1e-6
 MAX_LAG = 1.0   # s; a present further from the latest observation means another clock
@@ -188,11 +190,17 @@ class InteractionPlanner:
     """The estimator node's logic: idle -> observing -> committed -> done per interaction.
 
     ``onset(stamp_ns)`` resets the estimator; ``observe(stamp_ns, xyz)`` feeds it and returns
-    'used', 'skipped' or the reject reason; ``step()`` (timer) and ``end(stamp_ns)`` (last
-    plan) return a :class:`Step`. Observations that arrive outside an interaction are held
-    (at most ``pending_limit``) and replayed if a later onset covers them: events and
-    observations come on different topics, so an onset may be delivered after the first
-    observations it precedes.
+    'used', 'skipped', 'held' or the reject reason; ``step()`` (timer) and ``end(stamp_ns)``
+    (last plan) return a :class:`Step`.
+
+    Observations that arrive outside an interaction are held for ``hold_window`` seconds (of
+    their stamps): the observer forwards every sample as it comes and confirms an onset some
+    0.1-1 s after the hand left rest, back-dating it. At the onset the held samples from then on
+    are admitted (thinned by min_interval) into a backlog that ``absorb_backlog(budget)``
+    conditions on in slices, while live observations are conditioned on at once (the posterior
+    does not depend on the order, see OnlineEstimator.absorb): a live sample never waits behind
+    the whole backlog. The robot is committed only once the backlog is absorbed: on all the
+    evidence, as if every sample had been conditioned on when it came.
 
     ``interactions`` lists one record (dict) per interaction, the last one is the current one
     (the most recent ``max_records`` are kept). Absolute times (``*_time``) are seconds on the
@@ -208,7 +216,7 @@ class InteractionPlanner:
 
     def __init__(self, estimator, *, confidence_threshold: float = 0.9,
                  min_observations: int = 3, n_points: int = 25, lookahead: float = 0.1,
-                 settle_time: float = 0.5, labels=None, pending_limit: int = 1000,
+                 settle_time: float = 0.5, labels=None, hold_window: float = 2.5,
                  max_records: int = 1000, catch_up_velocity=None):
         if not 0.0 < confidence_threshold <= 1.0:
             raise ValueError(f'confidence_threshold must be in (0, 1], got {confidence_threshold}')
@@ -220,6 +228,8 @@ class InteractionPlanner:
             raise ValueError(f'lookahead must be >= 0, got {lookahead}')
         if not (np.isfinite(settle_time) and settle_time > 0):
             raise ValueError(f'settle_time must be > 0, got {settle_time}')
+        if not (np.isfinite(hold_window) and hold_window > 0):
+            raise ValueError(f'hold_window must be > 0, got {hold_window}')
         if labels is not None and len(labels) != estimator.n_components:
             raise ValueError(f'{len(labels)} component labels for {estimator.n_components} '
                              'components')
@@ -241,8 +251,9 @@ class InteractionPlanner:
         self.rejected = {reason: 0 for reason in REJECT_REASONS}
         self.plans_sent = 0
         self.plan_failures = 0
-        self._pending = deque()
-        self._pending_limit = int(pending_limit)
+        self._held = deque()      # (stamp ns, y) outside an interaction, newest hold_window s
+        self._hold_ns = round(float(hold_window) * 1e9)
+        self._backlog = deque()   # (t, y) admitted at the onset, not yet absorbed
         self._max_records = max(1, int(max_records))
         self._onset_ns = None
         self._t_latest = None     # latest observation time (s since onset), used or skipped
@@ -270,8 +281,13 @@ class InteractionPlanner:
         return self.state in ('observing', 'committed')
 
     @property
-    def n_pending(self) -> int:
-        return len(self._pending)
+    def n_held(self) -> int:
+        return len(self._held)
+
+    @property
+    def n_backlog(self) -> int:
+        """Held observations of the interaction not yet absorbed (see absorb_backlog)."""
+        return len(self._backlog)
 
     def label(self, k: Optional[int]):
         return None if (k is None or self.labels is None) else self.labels[k]
@@ -291,9 +307,9 @@ class InteractionPlanner:
             self.current['n_received'] += 1
         return self._rejected_in_interaction(reason)
 
-    def onset(self, stamp_ns: int) -> list:
-        """Start an interaction at ``stamp_ns``; returns the reject reasons of held
-        observations that turned out to precede it (one entry each)."""
+    def onset(self, stamp_ns: int) -> None:
+        """Start an interaction at ``stamp_ns``: the held observations from then on are
+        admitted into the backlog (older ones were rest before the movement: dropped)."""
         if self.active:
             self._close('new_onset', None)
         self.estimator.reset()
@@ -317,15 +333,11 @@ class InteractionPlanner:
             'n_observations': 0, 'n_received': 0, 'n_skipped': 0, 'n_rejected': 0,
             'plans': 0, 'switches': [], 'gaps': 0, 'end_reason': None, 'end_time': None,
             'end_elapsed': None})
-        held, self._pending = self._pending, deque()
-        dropped = []
-        for ns, xyz in held:
+        held, self._held = self._held, deque()
+        for ns, y in held:
             if ns >= self._onset_ns:
-                self.received -= 1          # counted on arrival already
-                self.observe(ns, xyz)
-            else:
-                dropped.append(self.reject('outside_interaction'))
-        return dropped
+                self.current['n_received'] += 1
+                self._take((ns - self._onset_ns) * 1e-9, y, defer=True)
 
     def gap(self) -> None:
         if self.active:
@@ -337,28 +349,54 @@ class InteractionPlanner:
         if self.active:
             self.current['n_received'] += 1
         y = np.asarray(xyz, dtype=float)
-        if y.shape != (self.estimator.n_observed,) or not np.all(np.isfinite(y)):
+        if y.shape != (self.estimator.n_observed,) or not np.isfinite(y).all():
             return self._rejected_in_interaction('non_finite')
         if not self.active:
-            self._pending.append((int(stamp_ns), y))
-            if len(self._pending) > self._pending_limit:
-                self._pending.popleft()
-                return self.reject('outside_interaction')
+            self._hold(int(stamp_ns), y)
             return 'held'
+        return self._take((int(stamp_ns) - self._onset_ns) * 1e-9, y, defer=False)
+
+    def absorb_backlog(self, budget: float) -> int:
+        """Condition on backlog observations for about ``budget`` seconds (at least one);
+        returns how many were absorbed."""
+        n = 0
+        deadline = time.perf_counter() + budget
+        while self._backlog:
+            self.estimator.absorb(*self._backlog.popleft())
+            n += 1
+            if time.perf_counter() >= deadline:
+                break
+        if n:
+            self._dirty = True
+        return n
+
+    def _hold(self, stamp_ns: int, y) -> None:
+        h = self._held
+        h.append((stamp_ns, y))
+        # Older than the window, or newer than this one: the stamps' clock restarted.
+        while h[0][0] < stamp_ns - self._hold_ns or h[0][0] > stamp_ns:
+            h.popleft()
+
+    def _take(self, t: float, y, defer: bool) -> str:
+        """An observation of the current interaction at t (s since onset): conditioned on now,
+        or (``defer``) appended to the backlog."""
         rec = self.current
-        t = (int(stamp_ns) - self._onset_ns) * 1e-9
         if t < 0:
             return self._rejected_in_interaction('before_onset')
         if self._t_latest is not None and t <= self._t_latest:
             return self._rejected_in_interaction('time_backwards')
         try:
-            used = self.estimator.update(t, y)
+            used = self.estimator.admit(t)
+            if used and not defer:
+                self.estimator.absorb(t, y)
         except ValueError:
             return self._rejected_in_interaction('exception')
         self._t_latest = t
         self._y_latest = y
         self._dirty = True
         if used:
+            if defer:
+                self._backlog.append((t, y))
             self.used += 1
             rec['n_observations'] += 1
             return 'used'
@@ -404,8 +442,9 @@ class InteractionPlanner:
             return Step(summary, plan, send=False, problem=problem)
         committed_now = False
         if self.state == 'observing':
-            if not should_commit(summary[:K], est.n_observations, self.confidence_threshold,
-                                 self.min_observations):
+            if self._backlog or not should_commit(summary[:K], est.n_observations,
+                                                  self.confidence_threshold,
+                                                  self.min_observations):
                 return Step(summary, plan, send=False)
             committed_now = True
             self.state = rec['state'] = 'committed'
@@ -429,6 +468,7 @@ class InteractionPlanner:
         """The human stopped: the last plan (sent only if committed), then 'done'."""
         if not self.active:
             return None
+        self.absorb_backlog(float('inf'))
         t_end = (int(stamp_ns) - self._onset_ns) * 1e-9
         if np.isfinite(t_end) and t_end > self.t_now:
             self._t_latest = t_end
@@ -437,6 +477,7 @@ class InteractionPlanner:
         return step
 
     def _close(self, reason: str, t_end: Optional[float]) -> None:
+        self._backlog.clear()
         rec = self.current
         rec['end_reason'] = reason
         rec['end_elapsed'] = t_end

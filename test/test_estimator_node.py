@@ -253,11 +253,42 @@ def test_timers_replan_and_publish_diagnostics(harness, trained):
     assert 0 < float(values['commit_phase']) < 1
 
 
+def test_observations_before_the_onset_event_are_absorbed_in_slices(harness, trained):
+    """As the observer sends them: the samples come first, the back-dated onset later. They
+    are absorbed a slice per callback; the robot is committed only once all are in, and the
+    plan is the oracle's on every observation in time order."""
+    model_path, held = trained
+    demo = held[1]
+    h = harness(**{**MANUAL, 'backlog_budget': 1e-6, 'confidence_threshold': 0.5})
+    n = len(demo.t) // 3
+    h.feed(demo, list(range(n)))
+    assert h.node.planner.n_held == n and h.node.state == 'idle'
+    h.event('onset', ONSET_NS)
+    h.spin_until(lambda: h.node.state == 'observing', what='onset')
+    backlog = h.node.planner.n_backlog
+    assert backlog == h.node.interactions[-1]['n_observations'] - 1 > 2  # one slice taken
+    assert h.got['trajectory'] == []
+    h.feed(demo, list(range(n, n + backlog)))    # each live one brings a slice
+    assert h.node.planner.n_backlog == 0 and h.node.state == 'committed'
+    first = h.wait_for('trajectory', 1)           # sent when the last slice was absorbed
+    assert h.node.interactions[-1]['commit_observations'] == _oracle(
+        model_path, demo, range(n + backlog)).n_observations
+    assert len(first.points) >= 1
+    h.feed(demo, [n + backlog])
+    h.node.replan()
+    traj = h.wait_for('trajectory', 2)
+    oracle = _oracle(model_path, demo, range(n + backlog + 1))
+    _, alpha = oracle.map_hypothesis()
+    phases = np.array([_seconds(pt.time_from_start) for pt in traj.points]) * alpha
+    assert np.allclose([pt.positions for pt in traj.points],
+                       oracle.predict(phases)['controlled']['position'], atol=1e-9)
+
+
 def test_bad_input_is_counted_and_the_node_keeps_working(harness, trained):
     model_path, held = trained
     demo = held[0]
     h = harness(**MANUAL)
-    h.observation(ONSET_NS - _ns(1.0), demo.observed[0])           # before any onset
+    h.observation(ONSET_NS - _ns(1.0), demo.observed[0])           # held, rest before the onset
     h.spin_until(lambda: h.node.planner.received == 1, what='stray observation')
     h.event('onset', ONSET_NS)
     h.spin_until(lambda: h.node.state == 'observing', what='onset')
@@ -274,8 +305,8 @@ def test_bad_input_is_counted_and_the_node_keeps_working(harness, trained):
     rec = h.node.interactions[-1]
     assert (rec['n_received'], rec['n_rejected']) == (44, 4)
     assert h.node.planner.rejected == {
-        'wrong_frame': 1, 'non_finite': 1, 'outside_interaction': 1, 'before_onset': 1,
-        'time_backwards': 1, 'exception': 0, 'bad_joint_state': 0}
+        'wrong_frame': 1, 'non_finite': 1, 'before_onset': 1, 'time_backwards': 1,
+        'exception': 0, 'bad_joint_state': 0}
     h.node.replan()
     traj = h.wait_for('trajectory', 1)
     oracle = _oracle(model_path, demo, idx)

@@ -275,9 +275,10 @@ def test_bad_input_is_counted_and_estimation_goes_on(trained):
     onset = 5_000_000_000
     # before any onset: held, then dropped when the onset turns out to be later
     assert planner.observe(onset - _ns(0.5), demo.observed[0]) == 'held'
-    # arrives before its onset event but is stamped after it: replayed at the onset
+    # arrives before its onset event but is stamped after it: taken at the onset
     assert planner.observe(onset + _ns(demo.t[0]), demo.observed[0]) == 'held'
-    assert planner.onset(onset) == ['outside_interaction']
+    planner.onset(onset)
+    assert planner.n_backlog == 1 and planner.absorb_backlog(1.0) == 1
     oracle.update(_t(demo.t[0]), demo.observed[0])
     assert planner.current['n_observations'] == 1
     assert planner.observe(onset - 1, demo.observed[1]) == 'before_onset'
@@ -288,9 +289,8 @@ def test_bad_input_is_counted_and_estimation_goes_on(trained):
         oracle.update(_t(t), y)
     assert planner.observe(onset + _ns(demo.t[5]), demo.observed[5]) == 'time_backwards'
     assert planner.observe(onset + _ns(demo.t[-1]), demo.observed[-1]) == 'time_backwards'
-    assert planner.rejected == {'wrong_frame': 0, 'non_finite': 2, 'outside_interaction': 1,
-                                'before_onset': 1, 'time_backwards': 2, 'exception': 0,
-                                'bad_joint_state': 0}
+    assert planner.rejected == {'wrong_frame': 0, 'non_finite': 2, 'before_onset': 1,
+                                'time_backwards': 2, 'exception': 0, 'bad_joint_state': 0}
     assert planner.current['n_rejected'] == 5
     step = planner.step()
     assert step.send
@@ -300,18 +300,70 @@ def test_bad_input_is_counted_and_estimation_goes_on(trained):
     # after the end: held for a possible next onset, never fed to the finished interaction
     n = planner.current['n_observations']
     assert planner.observe(onset + _ns(demo.t[-1] + 0.1), demo.observed[-1]) == 'held'
-    assert planner.current['n_observations'] == n and planner.n_pending == 1
+    assert planner.current['n_observations'] == n and planner.n_held == 1
 
 
-def test_pending_observations_are_bounded(trained):
+def test_held_observations_cover_the_hold_window(trained):
     model, meta, held = trained
-    planner, _ = _planner(model, meta, pending_limit=3)
+    planner, _ = _planner(model, meta, hold_window=0.025)
     results = [planner.observe(_ns(0.01 * i), held[0].observed[i]) for i in range(5)]
-    assert results == ['held'] * 3 + ['outside_interaction'] * 2
-    assert planner.n_pending == 3
-    planner.onset(_ns(0.03))                               # keeps 0.03, 0.04
-    assert planner.rejected['outside_interaction'] == 3
-    assert planner.current['n_received'] == 2
+    assert results == ['held'] * 5
+    assert planner.n_held == 3                             # 0.02, 0.03, 0.04
+    planner.onset(_ns(0.03))                               # takes 0.03 and 0.04
+    assert planner.current['n_received'] == 2 and planner.n_held == 0
+    assert sum(planner.rejected.values()) == 0
+    planner.end(_ns(0.5))
+    planner.observe(_ns(10.0), held[0].observed[0])
+    planner.observe(_ns(1.0), held[0].observed[1])         # the stamps' clock restarted
+    assert planner.n_held == 1
+
+
+def test_backlog_absorbed_after_live_observations_gives_the_time_ordered_posterior(trained):
+    """Samples held before the onset, absorbed in slices after live ones: the posterior equals
+    the time-ordered one (the weights are static)."""
+    model, meta, held = trained
+    demo = held[1]
+    planner, oracle = _planner(model, meta, confidence_threshold=0.5, min_observations=1)
+    onset = 7_000_000_000
+    n_held = int(0.3 * len(demo.t))
+    for t, y in zip(demo.t[:n_held], demo.observed[:n_held]):
+        assert planner.observe(onset + _ns(t), y) == 'held'
+    planner.onset(onset)
+    n_backlog = planner.n_backlog
+    assert n_backlog == planner.current['n_observations'] > 2
+    assert planner.estimator.n_observations == 0
+    live = [(t, y) for t, y in zip(demo.t[n_held:], demo.observed[n_held:])][:20]
+    for t, y in live:
+        planner.observe(onset + _ns(t), y)
+    assert planner.estimator.n_observations > 0 and planner.n_backlog == n_backlog  # live first
+    assert planner.absorb_backlog(0.0) == 1                # at least one per call
+    while planner.n_backlog:
+        planner.absorb_backlog(1e-4)
+    for t, y in zip(demo.t, demo.observed):
+        if t <= live[-1][0]:
+            oracle.update(_t(t), y)
+    assert planner.estimator.n_observations == oracle.n_observations
+    np.testing.assert_allclose(planner.estimator.log_evidence, oracle.log_evidence,
+                               rtol=1e-9, atol=1e-8)
+    np.testing.assert_allclose(planner.estimator.sigma, oracle.sigma, rtol=1e-8, atol=1e-12)
+    step = planner.step()
+    assert step.send and step.committed_now
+    assert np.allclose(step.plan.positions, oracle.predict(step.plan.phases)['controlled']
+                       ['position'], atol=1e-10)
+
+
+def test_end_absorbs_what_is_left_of_the_backlog(trained):
+    model, meta, held = trained
+    demo = held[0]
+    planner, oracle = _planner(model, meta, confidence_threshold=0.5, min_observations=1)
+    for t, y in zip(demo.t, demo.observed):
+        planner.observe(_ns(t), y)
+        oracle.update(_t(t), y)
+    planner.onset(0)
+    assert planner.n_backlog == oracle.n_observations
+    step = planner.end(_ns(demo.t[-1]))
+    assert planner.n_backlog == 0 and step.send
+    assert planner.estimator.n_observations == oracle.n_observations
 
 
 def test_new_onset_closes_the_unfinished_interaction(trained):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mixture_ip_ros.core.segmentation import (
-    Event, fit_cubic_onset, InteractionGate, MotionSegmenter, Sample, segment_motion)
+    Event, fit_cubic_onset, MotionSegmenter, segment_motion)
 
 T_ABS = 1.7e9  # realistic epoch stamps: exercises the running sums' precision
 
@@ -226,40 +226,6 @@ def test_onset_never_before_stream_start():
     late = t > true_on + 0.15  # recording starts with the hand already moving
     onset, _ = segment_motion(t[late], p[late])
     assert t[late][0] <= onset < true_on + 0.3
-
-
-def test_interaction_gate_orders_and_forwards_samples():
-    t, p, true_on, true_end = reach(500, 0.4, 1.0, seed=12, tail=1.0)
-    gate = InteractionGate(MotionSegmenter())
-    out = []
-    for i, (ti, pi) in enumerate(zip(t.tolist(), p.tolist())):
-        out.extend(gate.push(ti, pi, payload=i))
-    kinds = ['sample' if isinstance(o, Sample) else o.kind for o in out]
-    assert kinds[0] == 'onset' and kinds.count('onset') == 1
-    assert kinds[-1] == 'end' and kinds.count('end') == 1
-    onset, end = out[0], out[-1]
-    samples = out[1:-1]
-    assert all(isinstance(s, Sample) for s in samples)
-    # Every input sample from the back-dated onset until the end was confirmed, in order,
-    # unchanged, including those buffered before the onset was confirmed.
-    idx = [s.payload for s in samples]
-    first = int(np.searchsorted(t, onset.time))
-    assert idx == list(range(first, first + len(idx)))
-    seg = gate.segmenter
-    assert t[idx[-1]] < end.time + seg.end_hold + seg.speed_window
-    for s in samples[::50]:
-        assert s.time == t[s.payload] and s.position == tuple(p[s.payload])
-    assert not gate.active
-
-
-def test_gate_passes_gaps_and_buffers_only_recent_samples():
-    seg = MotionSegmenter(max_backdate=0.5)
-    gate = InteractionGate(seg)
-    t = np.arange(0.0, 3.0, 0.002)
-    for ti in t.tolist():
-        assert gate.push(ti, (0.0, 0.0, 0.0)) == []
-    assert len(gate._history) <= 0.5 / 0.002 + 1
-    assert gate.gap(3.5) == [Event('gap', float(t[-1]))]
 
 
 def test_invalid_input_is_rejected():

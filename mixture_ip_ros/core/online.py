@@ -67,11 +67,19 @@ class OnlineEstimator:
         Returns False (and changes nothing) when the sample is within ``min_interval`` of the
         last one used. Raises ValueError for non-finite or misshaped input or time going back.
         """
-        y = np.asarray(y, dtype=float)
-        if y.shape != (self.n_observed,):
-            raise ValueError(f'observation must have shape ({self.n_observed},), got {y.shape}')
-        if not np.all(np.isfinite(y)) or not np.isfinite(t):
-            raise ValueError('observation or time is NaN or Inf')
+        y = self._checked(y)
+        if not self.admit(t):
+            return False
+        self.absorb(t, y)
+        return True
+
+    def admit(self, t: float) -> bool:
+        """Whether an observation at ``t`` is used: times increase and, after the first, are
+        at least ``min_interval`` apart. An admitted time becomes the last one; absorb it (now
+        or later) with :meth:`absorb`. Raises ValueError for a non-finite, negative or earlier t.
+        """
+        if not np.isfinite(t):
+            raise ValueError('observation time is NaN or Inf')
         if t < 0:
             raise ValueError(f'time {t} is before the onset (t must be >= 0)')
         if self.t_last is not None:
@@ -79,13 +87,32 @@ class OnlineEstimator:
                 raise ValueError(f'time must increase: {t} after {self.t_last}')
             if t - self.t_last < self.min_interval - 1e-9:   # stamps are ns: no float slack
                 return False
+        self.t_last = float(t)
+        return True
+
+    def absorb(self, t: float, y) -> None:
+        """Condition every hypothesis on ``y`` observed at ``t`` (eqs. 17-18, recursive).
+
+        In any order: the weights do not change over the movement, so the posterior and the
+        evidence after a set of observations do not depend on the order they were absorbed in
+        (the planner absorbs the samples held before an onset while live ones come in).
+        """
+        y = self._checked(y)
+        if not (np.isfinite(t) and t >= 0):
+            raise ValueError(f'observation time must be finite and >= 0, got {t}')
         psi = basis_rows(self.alphas * t, self.model.basis_.centers, self.model.basis_.width)
         kalman_update(self.sigma, self.mu, self.log_evidence_flat, psi, self._psi_index, y,
                       self._noise)
-        self.t_last = float(t)
         self.n_observations += 1
         self._joint = None
-        return True
+
+    def _checked(self, y) -> np.ndarray:
+        y = np.asarray(y, dtype=float)
+        if y.shape != (self.n_observed,):
+            raise ValueError(f'observation must have shape ({self.n_observed},), got {y.shape}')
+        if not np.isfinite(y).all():
+            raise ValueError('observation is NaN or Inf')
+        return y
 
     # ------------------------------------------------------------------ queries
     @property

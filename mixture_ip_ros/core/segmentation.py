@@ -42,14 +42,6 @@ class Event(NamedTuple):
     time: float
 
 
-class Sample(NamedTuple):
-    """A sample an ``InteractionGate`` forwards; ``payload`` is whatever the caller attached."""
-
-    time: float
-    position: Tuple[float, float, float]
-    payload: object = None
-
-
 def fit_cubic_onset(t, positions, lo: float, hi: float, step: float = 0.01) -> float:
     """Least-squares onset time of p(t) = b + a (t - t_onset)^3_+ with t_onset in [lo, hi].
 
@@ -379,74 +371,6 @@ class MotionSegmenter:
         if not reverse:
             return fit_cubic_onset(a[:, 0], a[:, 1:], lo, hi)
         return -fit_cubic_onset(-a[::-1, 0], a[::-1, 1:], -hi, -lo)
-
-
-class InteractionGate:
-    """Decides what an observer forwards: samples only during an interaction, events in order.
-
-    Keeps the last ``max_backdate`` seconds of samples while idle so that, when an onset is
-    confirmed, the 'onset' event and then every sample from the back-dated onset on are
-    released (in that order), followed by live samples until the 'end' event. The end is
-    confirmed ``end_hold`` (plus the velocity lag) after the hand came to rest, so the last
-    forwarded samples are stamped after the 'end' time: the hand at rest. 'gap' events pass
-    through whenever they occur.
-    """
-
-    def __init__(self, segmenter: MotionSegmenter):
-        self.segmenter = segmenter
-        self._history = deque()
-        self._active = False
-
-    @property
-    def active(self) -> bool:
-        """True while samples are forwarded (between 'onset' and 'end')."""
-        return self._active
-
-    def reset(self):
-        """Forget the stream (the segmenter too)."""
-        self.segmenter.reset()
-        self._history.clear()
-        self._active = False
-
-    def push(self, t: float, position, payload=None) -> list:
-        """Feed one sample; returns the ordered outputs (``Event`` and ``Sample`` items)."""
-        sample = Sample(float(t), tuple(position), payload)
-        events = self.segmenter.update(t, position)
-        out = []
-        forwarded = False
-        for ev in events:
-            out.append(ev)
-            if ev.kind == 'onset':
-                self._active = True
-                for s in self._history:
-                    if s.time >= ev.time:
-                        out.append(s)
-                self._history.clear()
-                if sample.time >= ev.time:
-                    out.append(sample)
-                    forwarded = True
-            elif ev.kind == 'end':
-                self._active = False
-        if self._active:
-            if not forwarded:
-                out.append(sample)
-        else:
-            self._remember(sample)
-        return out
-
-    def gap(self, t_now: float) -> List[Event]:
-        """``MotionSegmenter.gap``, keeping the forwarding state in step."""
-        events = self.segmenter.gap(t_now)
-        if any(ev.kind == 'end' for ev in events):
-            self._active = False
-        return events
-
-    def _remember(self, sample):
-        h = self._history
-        h.append(sample)
-        horizon = sample.time - self.segmenter.max_backdate
-        while h[0].time < horizon:
-            h.popleft()
 
 
 def segment_motion(t, positions, **params) -> Tuple[float, float]:

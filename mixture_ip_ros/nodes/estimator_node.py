@@ -21,7 +21,10 @@ Publishes   /iiwa/joint_trajectory     trajectory_msgs/JointTrajectory, reliable
             /diagnostics               diagnostic_msgs/DiagnosticArray about every
                 diagnostics_period s: state, update latency (last/mean/max us), observations
                 used/skipped/rejected by reason, commit phase, plans sent.
-Times are those of the observations' stamps: an observation is at stamp - onset stamp.
+Observations outside an interaction are held for hold_window s; at an onset those from the
+(back-dated) onset on are absorbed a backlog_budget slice per callback, live ones at once
+(planning.InteractionPlanner). Times are those of the observations' stamps: an observation is
+at stamp - onset stamp.
 Timers run on the node clock (use_sim_time works). Refuses to start (ValueError, non-zero exit
 from main) without a valid model whose joints, observed DOFs and frame match the parameters.
 """
@@ -90,6 +93,12 @@ class EstimatorNode(Node):
         # Joint speeds the robot may use to catch up with a new plan: half the iiwa 14 limits.
         self.declare_parameter('catch_up_velocity', [0.74, 0.74, 0.87, 0.65, 1.13, 1.18, 1.18])
         self.declare_parameter('diagnostics_period', 1.0)
+        # Observations held outside an interaction, s of their stamps: at least the observer's
+        # max_backdate, so that a back-dated onset finds its samples.
+        self.declare_parameter('hold_window', 2.5)
+        # Time per callback spent absorbing the held samples after an onset, so that live
+        # observations do not wait behind all of them.
+        self.declare_parameter('backlog_budget', 0.002)
         self.declare_parameter('input_queue_depth', 1000)
         self.declare_parameter('output_queue_depth', 10)
         self.declare_parameter('log_throttle_sec', 2.0)
@@ -110,7 +119,8 @@ class EstimatorNode(Node):
             raise ValueError(f"model file {model_path}: trained in frame "
                              f"{meta.get('observed_frame')!r}, observations are expected in "
                              f'{self.observed_frame!r} (parameter observed_frame)')
-        for name in ('replan_rate_hz', 'diagnostics_period', 'log_throttle_sec'):
+        for name in ('replan_rate_hz', 'diagnostics_period', 'log_throttle_sec', 'hold_window',
+                     'backlog_budget'):
             if not float(param(name)) > 0:
                 raise ValueError(f'parameter {name} must be > 0, got {param(name)}')
         for name in ('input_queue_depth', 'output_queue_depth'):
@@ -128,11 +138,12 @@ class EstimatorNode(Node):
             self.estimator, confidence_threshold=float(param('confidence_threshold')),
             min_observations=int(param('min_observations')), n_points=int(param('n_points')),
             lookahead=float(param('lookahead')), settle_time=float(param('settle_time')),
-            labels=meta.get('component_labels'), pending_limit=int(param('input_queue_depth')),
+            labels=meta.get('component_labels'), hold_window=float(param('hold_window')),
             catch_up_velocity=self._catch_up_velocity(param('catch_up_velocity')))
         self._throttle = float(param('log_throttle_sec'))
         self._replan_period = 1.0 / float(param('replan_rate_hz'))
         self._replan_on_observation = bool(param('replan_on_observation'))
+        self._backlog_budget = float(param('backlog_budget'))
         self._next_replan = None   # stamp-clock time (s since onset) of the next replan
         self._last_replan_wall = -float('inf')   # of the latest replan by an observation
         self.latency = LatencyStats()         # OnlineEstimator update, per used observation
@@ -220,20 +231,20 @@ class EstimatorNode(Node):
             result = self.planner.observe(_stamp_ns(msg.header.stamp), (p.x, p.y, p.z))
             if result == 'used':
                 self.latency.add(time.perf_counter() - t0)
-                # Replan right away (at most at replan_rate_hz on the stamps' clock): the
-                # robot reacts within the observation's latency, not a timer period.
-                t = self.planner.t_now
-                # Also limited on the wall clock: the observations held back until an onset
-                # arrive as a burst and must not each cost a replan (the timer follows up).
-                if self._replan_on_observation and (
-                        self._next_replan is None or t >= self._next_replan - 1e-9) and (
-                        time.perf_counter() - self._last_replan_wall >= self._replan_period):
-                    self._next_replan = t + self._replan_period
-                    self._last_replan_wall = time.perf_counter()
-                    self.replan()
             elif result not in ('skipped', 'held'):
                 self._warn_rejected(result, f'stamp {msg.header.stamp.sec}.'
                                             f'{msg.header.stamp.nanosec:09d}')
+                return
+            # Replan right away (at most at replan_rate_hz on the stamps' clock): the robot
+            # reacts within the observation's latency, not a timer period. Also limited on the
+            # wall clock, for streams replayed faster than real time (the timer follows up).
+            t = self.planner.t_now
+            if result == 'used' and self._replan_on_observation and (
+                    self._next_replan is None or t >= self._next_replan - 1e-9) and (
+                    time.perf_counter() - self._last_replan_wall >= self._replan_period):
+                self._replan_now()
+            # After the plan is out: a slice of the samples held before the onset.
+            self._absorb_backlog()
         except Exception as exc:  # a bad message must not kill the node
             self.planner.reject('exception')
             self.get_logger().error(f'observation dropped, callback failed: {exc!r}',
@@ -248,10 +259,11 @@ class EstimatorNode(Node):
                 self._next_replan = None
                 if self.planner.active:
                     self._log_unfinished()
-                for reason in self.planner.onset(stamp_ns):
-                    self._warn_rejected(reason, 'stamp before this onset')
+                self.planner.onset(stamp_ns)
                 self.get_logger().info(f'onset at {msg.stamp.sec}.{msg.stamp.nanosec:09d}: '
-                                       'new interaction')
+                                       f'new interaction, {self.planner.n_backlog} held '
+                                       'observations to absorb')
+                self._absorb_backlog()
             elif kind == 'end':
                 self.events['end'] += 1
                 if self.planner.active:
@@ -276,8 +288,26 @@ class EstimatorNode(Node):
 
     def on_replan_timer(self) -> None:
         """Covers pauses: replans unless an observation replanned within the last period."""
+        if self._absorb_backlog():
+            return
         if time.perf_counter() - self._last_replan_wall >= self._replan_period:
             self.replan()
+
+    def _absorb_backlog(self) -> bool:
+        """A slice of the samples held before the onset (backlog_budget s of work); True if
+        that finished them, and then replans on all the evidence."""
+        if not self.planner.n_backlog:
+            return False
+        self.planner.absorb_backlog(self._backlog_budget)
+        if self.planner.n_backlog:
+            return False
+        self._replan_now()
+        return True
+
+    def _replan_now(self) -> None:
+        self._next_replan = self.planner.t_now + self._replan_period
+        self._last_replan_wall = time.perf_counter()
+        self.replan()
 
     def replan(self) -> None:
         """Update the posterior summary, the predicted path and (once committed) the robot's
@@ -363,7 +393,8 @@ class EstimatorNode(Node):
             'observations_received': pl.received,
             'observations_used': pl.used,
             'observations_skipped': pl.skipped,
-            'observations_held': pl.n_pending,
+            'observations_held': pl.n_held,
+            'observations_backlog': pl.n_backlog,
             'interaction_observations_used': rec.get('n_observations'),
             **{f'rejected_{k}': v for k, v in pl.rejected.items()},
             'update_latency_last_us': round(self.latency.last_us, 1),

@@ -2,12 +2,14 @@
 
 Subscribes  /mocap/wrist     geometry_msgs/PoseStamped (sensor-data QoS)
 Publishes   /observer/wrist  geometry_msgs/PointStamped in the robot base frame with the
-                             original stamps, from the (back-dated) movement onset until the
-                             'end' event is published (its last points are the hand at rest)
+                             original stamps: every accepted pose, as it comes
             /observer/event  std_msgs/Header, frame_id 'onset' | 'end' | 'gap', stamp = when
                              (a gap's stamp is the last sample before the silence)
 Both outputs are reliable with a deep queue: the estimator must not lose observations.
-'onset' is published before the first observation of its interaction. Poses that fail a
+An onset is confirmed some 0.1-1 s after the hand left rest and back-dated to then: the
+estimator holds the recent samples and takes those from the onset on when the event comes
+(forwarding them only then would send a burst of ~40 messages that live samples queue
+behind). A pose's own observation goes out before the events it settles. Poses that fail a
 check are dropped and counted (``drop_counts``); the logic lives in core.pose_validation and
 core.segmentation, which are tested without ROS.
 """
@@ -26,7 +28,7 @@ from std_msgs.msg import Header
 
 from mixture_ip_ros.core.pose_validation import (
     check_pose, FrameTransform, ns_to_stamp, REJECT_REASONS)
-from mixture_ip_ros.core.segmentation import Event, InteractionGate, MotionSegmenter
+from mixture_ip_ros.core.segmentation import Event, MotionSegmenter
 from mixture_ip_ros.nodes.spinning import spin_until_shutdown
 
 SEGMENTER_DEFAULTS = {name: p.default
@@ -64,9 +66,9 @@ class ObserverNode(Node):
         self._restart_after = int(param('restart_after_backwards'))
         self.transform = FrameTransform(list(param('mocap_to_base_xyz')),
                                         list(param('mocap_to_base_xyzw')))
-        segmenter = MotionSegmenter(**{name: param(name) for name in SEGMENTER_DEFAULTS})
-        self.gate = InteractionGate(segmenter)
-        self._gap_timeout = segmenter.gap_timeout
+        self.segmenter = MotionSegmenter(**{name: param(name) for name in SEGMENTER_DEFAULTS})
+        self.moving = False   # between an 'onset' and its 'end'
+        self._gap_timeout = self.segmenter.gap_timeout
 
         # Counters for monitoring and tests.
         self.drop_counts = {reason: 0 for reason in REJECT_REASONS}
@@ -113,8 +115,8 @@ class ObserverNode(Node):
             silence = (self.get_clock().now().nanoseconds - self._last_arrival_ns) * 1e-9
             if silence > self._gap_timeout:
                 # Stream time now, judged by our clock: mocap and node clocks may be offset.
-                t_now = self.gate.segmenter.last_time + silence
-                self._publish(self.gate.gap(t_now))
+                t_now = self.segmenter.last_time + silence
+                self._publish_events(self.segmenter.gap(t_now))
         except Exception as exc:
             self.get_logger().error(f'gap check failed: {exc!r}',
                                     throttle_duration_sec=self._throttle)
@@ -145,7 +147,14 @@ class ObserverNode(Node):
         self._last_arrival_ns = now_ns if now_ns > 0 else None
         self.accepted += 1
         t = (stamp_ns - self._t_ref_ns) * 1e-9
-        self._publish(self.gate.push(t, self.transform.apply(*position), stamp))
+        xyz = self.transform.apply(*position)
+        out = PointStamped()
+        out.header.stamp = stamp
+        out.header.frame_id = self._base_frame
+        out.point.x, out.point.y, out.point.z = xyz
+        self._obs_pub.publish(out)
+        self.published['observations'] += 1
+        self._publish_events(self.segmenter.update(t, xyz))
 
     def _restarted(self, stamp_ns: int) -> bool:
         """Count a pose older than the last accepted one; True once the stream restarted."""
@@ -157,10 +166,11 @@ class ObserverNode(Node):
         self.get_logger().warning(
             f'{self._backwards} consecutive wrist poses older than the last accepted one: '
             f'taking the stream as restarted')
-        last_t = self.gate.segmenter.last_time
-        if self.gate.active and last_t is not None:
-            self._publish([Event('end', last_t)])
-        self.gate.reset()
+        last_t = self.segmenter.last_time
+        if self.moving and last_t is not None:
+            self._publish_events([Event('end', last_t)])
+        self.segmenter.reset()
+        self.moving = False
         self._t_ref_ns = None
         self._last_stamp_ns = None
         self._last_arrival_ns = None
@@ -168,20 +178,12 @@ class ObserverNode(Node):
         self.stream_restarts += 1
         return True
 
-    def _publish(self, outputs) -> None:
-        """Publish the gate's outputs in order (an 'onset' precedes its observations)."""
-        for item in outputs:
-            if isinstance(item, Event):
-                header = Header(frame_id=item.kind, stamp=self._to_stamp(item.time))
-                self._event_pub.publish(header)
-                self.published[item.kind] += 1
-            else:
-                out = PointStamped()
-                out.header.stamp = item.payload
-                out.header.frame_id = self._base_frame
-                out.point.x, out.point.y, out.point.z = item.position
-                self._obs_pub.publish(out)
-                self.published['observations'] += 1
+    def _publish_events(self, events) -> None:
+        for ev in events:
+            self._event_pub.publish(Header(frame_id=ev.kind, stamp=self._to_stamp(ev.time)))
+            self.published[ev.kind] += 1
+            if ev.kind in ('onset', 'end'):
+                self.moving = ev.kind == 'onset'
 
     def _to_stamp(self, t: float) -> Time:
         sec, nanosec = ns_to_stamp(self._t_ref_ns + round(t * 1e9))
