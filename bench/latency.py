@@ -276,10 +276,11 @@ class Probe(Node):
             time.sleep(quiet)
 
 
-def triggering_observations(stamps, onset_ns, min_interval, replan_period):
+def triggering_observations(stamps, onset_ns, min_interval, replan_period, live_after=None):
     """Stamps of the observations whose callback replans (estimator_node's rule, replayed):
-    used when >= min_interval after the last used one (1 ns slack, as OnlineEstimator), and
-    replanning when its time since onset >= the previous such replan's + replan_period."""
+    used when >= min_interval after the last used one (1 ns slack, as OnlineEstimator), and,
+    if stamped after ``live_after`` (the held ones are absorbed outside the rule), replanning
+    when its time since onset >= the previous such replan's + replan_period."""
     out, t_used, next_replan = set(), None, None
     for ns in stamps:
         t = (ns - onset_ns) * 1e-9
@@ -288,6 +289,8 @@ def triggering_observations(stamps, onset_ns, min_interval, replan_period):
         if t_used is not None and t - t_used < min_interval - 1e-9:
             continue
         t_used = t
+        if live_after is not None and ns <= live_after:
+            continue
         if next_replan is None or t >= next_replan:
             next_replan = t + replan_period
             out.add(ns)
@@ -317,7 +320,8 @@ def analyse(stream, probe, seg_events, est_params, skip=0):
             continue
         forwarded = [ns for ns in stream.stamps[lo:hi] if end_pose is None or ns <= end_pose]
         triggers = triggering_observations(forwarded, T[0][1], float(est_params['min_interval']),
-                                           1.0 / float(est_params['replan_rate_hz']))
+                                           1.0 / float(est_params['replan_rate_hz']),
+                                           live_after=onset_pose)
         seen = set()
         for j, (tr, path) in enumerate(zip(T, P[len(P) - len(T):])):
             trig = path[1]

@@ -301,7 +301,7 @@ class EstimatorNode(Node):
         self.planner.absorb_backlog(self._backlog_budget)
         if self.planner.n_backlog:
             return False
-        self._replan_now()
+        self.replan()
         return True
 
     def _replan_now(self) -> None:
