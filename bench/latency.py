@@ -366,6 +366,23 @@ def pooled(results):
     return out
 
 
+def pooled_stats(stats):
+    """The node statistics of several in-process runs: means averaged, maxima and counts over
+    all of them."""
+    out = {}
+    for k in stats[0]:
+        values = [st[k] for st in stats]
+        if k.endswith('_mean'):
+            out[k] = round(float(np.mean(values)), 1)
+        elif k.endswith('_max'):
+            out[k] = max(values)
+        elif isinstance(values[0], dict):
+            out[k] = {r: sum(v.get(r, 0) for v in values) for r in set().union(*values)}
+        else:
+            out[k] = sum(values)
+    return out
+
+
 def latency_keys(res, suffix):
     out = ms_stats(res['lat'], 'e2e_ms', suffix)
     out[f'e2e_ms_p99_live{suffix}'] = ms_stats(res['live'], 'x')['x_p99']
@@ -656,7 +673,7 @@ def main():
         # that can dominate the tail of one run).
         runs = [run_latency_in_process(domain, model_path, warm, stream, every_pose)
                 for _ in range(args.repeats)]
-        res, stats = pooled([r for r, _ in runs]), runs[-1][1]
+        res, stats = pooled([r for r, _ in runs]), pooled_stats([st for _, st in runs])
         result.update(latency_keys(res, ''))
         result['e2e_ms_p99_per_run'] = [latency_keys(r, '')['e2e_ms_p99'] for r, _ in runs]
         result['e2e_ms_median_per_run'] = [latency_keys(r, '')['e2e_ms_median'] for r, _ in runs]

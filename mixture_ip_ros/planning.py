@@ -31,6 +31,7 @@ STATES = ('idle', 'observing', 'committed', 'done')
 # Why an observation was not used (beyond 'skipped': within min_interval of the last one used).
 REJECT_REASONS = ('wrong_frame', 'non_finite', 'before_onset',
                   'time_backwards', 'exception', 'bad_joint_state')
+MAX_HELD = 20_000   # held observations at most (2.5 s at 8 kHz), whatever their stamps
 PHASE_EPS = 1e-6
 MAX_LAG = 1.0   # s; a present further from the latest observation means another clock
 
@@ -251,7 +252,8 @@ class InteractionPlanner:
         self.rejected = {reason: 0 for reason in REJECT_REASONS}
         self.plans_sent = 0
         self.plan_failures = 0
-        self._held = deque()      # (stamp ns, y) outside an interaction, newest hold_window s
+        self._held = deque(maxlen=MAX_HELD)   # (stamp ns, y) outside an interaction
+
         self._hold_ns = round(float(hold_window) * 1e9)
         self._backlog = deque()   # (t, y) admitted at the onset, not yet absorbed
         self._max_records = max(1, int(max_records))
@@ -333,7 +335,7 @@ class InteractionPlanner:
             'n_observations': 0, 'n_received': 0, 'n_skipped': 0, 'n_rejected': 0,
             'plans': 0, 'switches': [], 'gaps': 0, 'end_reason': None, 'end_time': None,
             'end_elapsed': None})
-        held, self._held = self._held, deque()
+        held, self._held = self._held, deque(maxlen=MAX_HELD)
         for ns, y in held:
             if ns >= self._onset_ns:
                 self.current['n_received'] += 1
@@ -372,9 +374,10 @@ class InteractionPlanner:
 
     def _hold(self, stamp_ns: int, y) -> None:
         h = self._held
+        if h and stamp_ns <= h[-1][0]:
+            h.clear()        # the stamps' clock restarted (the observer sends them in order)
         h.append((stamp_ns, y))
-        # Older than the window, or newer than this one: the stamps' clock restarted.
-        while h[0][0] < stamp_ns - self._hold_ns or h[0][0] > stamp_ns:
+        while h[0][0] < stamp_ns - self._hold_ns:
             h.popleft()
 
     def _take(self, t: float, y, defer: bool) -> str:

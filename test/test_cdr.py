@@ -86,3 +86,19 @@ def test_path_matches_rclpy(frame, n):
     enc = PathEncoder(frame)
     assert deserialize_message(enc.encode(stamp_ns, stamps, xyz), Path) == ref
     assert deserialize_message(enc.encode(stamp_ns, stamps, xyz), Path) == ref
+
+
+def test_negative_and_extreme_times_and_bad_shapes():
+    enc = JointTrajectoryEncoder(['a', 'b'])
+    v = np.zeros((2, 2))
+    msg = deserialize_message(enc.encode(-1, [0, (2**31 - 1) * NS], v, v, v), JointTrajectory)
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (-1, NS - 1)
+    assert msg.points[1].time_from_start.sec == 2**31 - 1
+    with pytest.raises(ValueError, match='int32'):
+        enc.encode(2**31 * NS, [0, 1], v, v, v)
+    with pytest.raises(ValueError, match='int32'):
+        enc.encode(0, [0, -(2**31 + 1) * NS], v, v, v)
+    with pytest.raises(ValueError, match='shape'):
+        enc.encode(0, [0, 1], np.zeros((2, 1)), v, v)     # would broadcast
+    with pytest.raises(ValueError, match='shape'):
+        PathEncoder('w').encode(0, [0, 1], np.zeros((1, 3)))

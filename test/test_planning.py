@@ -313,9 +313,12 @@ def test_held_observations_cover_the_hold_window(trained):
     assert planner.current['n_received'] == 2 and planner.n_held == 0
     assert sum(planner.rejected.values()) == 0
     planner.end(_ns(0.5))
-    planner.observe(_ns(10.0), held[0].observed[0])
-    planner.observe(_ns(1.0), held[0].observed[1])         # the stamps' clock restarted
+    for i in range(3):
+        planner.observe(_ns(10.0 + 0.01 * i), held[0].observed[i])
+    planner.observe(_ns(10.005), held[0].observed[1])      # the stamps' clock restarted
     assert planner.n_held == 1
+    planner.onset(_ns(10.0))                               # nothing of the old clock mixed in
+    assert planner.n_backlog == 1 and planner.current['n_received'] == 1
 
 
 def test_backlog_absorbed_after_live_observations_gives_the_time_ordered_posterior(trained):

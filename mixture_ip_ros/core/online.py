@@ -70,7 +70,7 @@ class OnlineEstimator:
         y = self._checked(y)
         if not self.admit(t):
             return False
-        self.absorb(t, y)
+        self._absorb(t, y)
         return True
 
     def admit(self, t: float) -> bool:
@@ -100,11 +100,14 @@ class OnlineEstimator:
         y = self._checked(y)
         if not (np.isfinite(t) and t >= 0):
             raise ValueError(f'observation time must be finite and >= 0, got {t}')
+        self._absorb(t, y)
+
+    def _absorb(self, t, y):
+        self._joint = None
         psi = basis_rows(self.alphas * t, self.model.basis_.centers, self.model.basis_.width)
         kalman_update(self.sigma, self.mu, self.log_evidence_flat, psi, self._psi_index, y,
                       self._noise)
         self.n_observations += 1
-        self._joint = None
 
     def _checked(self, y) -> np.ndarray:
         y = np.asarray(y, dtype=float)
@@ -117,8 +120,10 @@ class OnlineEstimator:
     # ------------------------------------------------------------------ queries
     @property
     def log_evidence(self):
-        """log p(D | k, alpha_m), shape (K, M)."""
-        return self.log_evidence_flat.reshape(self.n_components, -1)
+        """log p(D | k, alpha_m), shape (K, M) (a read-only view)."""
+        view = self.log_evidence_flat.reshape(self.n_components, -1)
+        view.flags.writeable = False
+        return view
 
     def joint_posterior(self):
         """p(k, alpha_m | D), shape (K, M) (read-only)."""

@@ -17,6 +17,7 @@ import numpy as np
 
 _ENCAPSULATION = b'\x00\x01\x00\x00'
 _NS = 1_000_000_000
+_INT32_MIN, _INT32_MAX = -2**31, 2**31 - 1
 
 
 class _Template:
@@ -59,8 +60,17 @@ class _Template:
 
 def _fill_times(u32: np.ndarray, index: np.ndarray, ns) -> None:
     sec, nanosec = np.divmod(np.asarray(ns, dtype=np.int64), _NS)
+    if sec.size and (sec.min() < _INT32_MIN or sec.max() > _INT32_MAX):
+        raise ValueError('time outside the int32 seconds of builtin_interfaces/Time')
     u32[index] = sec.astype(np.int32).view(np.uint32)
     u32[index + 1] = nanosec
+
+
+def _check_shape(name: str, array, shape) -> np.ndarray:
+    array = np.asarray(array, dtype=float)
+    if array.shape != shape:
+        raise ValueError(f'{name} must have shape {shape}, got {array.shape}')
+    return array
 
 
 class _Encoder:
@@ -119,11 +129,14 @@ class JointTrajectoryEncoder(_Encoder):
         the others (n, Q) in the order of ``joint_names``."""
         times_ns = np.asarray(times_ns, dtype=np.int64)
         n = times_ns.shape[0]
+        shape = (n, len(self.joint_names))
+        values_in = [_check_shape(name, a, shape) for name, a in (
+            ('positions', positions), ('velocities', velocities),
+            ('accelerations', accelerations))]
         buf, u32, f64, (stamp, values, times) = self._buffers(n)
         _fill_times(u32, np.array([stamp]), [stamp_ns])
-        f64[values[:, 0]] = positions
-        f64[values[:, 1]] = velocities
-        f64[values[:, 2]] = accelerations
+        for field, a in enumerate(values_in):
+            f64[values[:, field]] = a
         _fill_times(u32, times, times_ns)
         return _ENCAPSULATION + bytes(buf)
 
@@ -152,6 +165,7 @@ class PathEncoder(_Encoder):
     def encode(self, stamp_ns: int, stamps_ns, positions) -> bytes:
         """The serialized message; ``stamps_ns`` (n,) pose stamps, ``positions`` (n, 3)."""
         stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
+        positions = _check_shape('positions', positions, (stamps_ns.shape[0], 3))
         buf, u32, f64, (stamp, stamps, xyz) = self._buffers(stamps_ns.shape[0])
         _fill_times(u32, np.array([stamp]), [stamp_ns])
         _fill_times(u32, stamps, stamps_ns)

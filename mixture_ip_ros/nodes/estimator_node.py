@@ -93,8 +93,8 @@ class EstimatorNode(Node):
         # Joint speeds the robot may use to catch up with a new plan: half the iiwa 14 limits.
         self.declare_parameter('catch_up_velocity', [0.74, 0.74, 0.87, 0.65, 1.13, 1.18, 1.18])
         self.declare_parameter('diagnostics_period', 1.0)
-        # Observations held outside an interaction, s of their stamps: at least the observer's
-        # max_backdate, so that a back-dated onset finds its samples.
+        # Observations held outside an interaction, s of their stamps: well over the observer's
+        # max_backdate, so that a back-dated onset (its event comes later) finds its samples.
         self.declare_parameter('hold_window', 2.5)
         # Time per callback spent absorbing the held samples after an onset, so that live
         # observations do not wait behind all of them.
@@ -235,6 +235,7 @@ class EstimatorNode(Node):
                 self._warn_rejected(result, f'stamp {msg.header.stamp.sec}.'
                                             f'{msg.header.stamp.nanosec:09d}')
                 return
+            absorbed_all = self._absorb_slice()
             # Replan right away (at most at replan_rate_hz on the stamps' clock): the robot
             # reacts within the observation's latency, not a timer period. Also limited on the
             # wall clock, for streams replayed faster than real time (the timer follows up).
@@ -242,9 +243,11 @@ class EstimatorNode(Node):
             if result == 'used' and self._replan_on_observation and (
                     self._next_replan is None or t >= self._next_replan - 1e-9) and (
                     time.perf_counter() - self._last_replan_wall >= self._replan_period):
-                self._replan_now()
-            # After the plan is out: a slice of the samples held before the onset.
-            self._absorb_backlog()
+                self._next_replan = t + self._replan_period
+                self._last_replan_wall = time.perf_counter()
+                self.replan()
+            elif absorbed_all:
+                self.replan()     # on all the evidence: the robot may be committed now
         except Exception as exc:  # a bad message must not kill the node
             self.planner.reject('exception')
             self.get_logger().error(f'observation dropped, callback failed: {exc!r}',
@@ -263,7 +266,8 @@ class EstimatorNode(Node):
                 self.get_logger().info(f'onset at {msg.stamp.sec}.{msg.stamp.nanosec:09d}: '
                                        f'new interaction, {self.planner.n_backlog} held '
                                        'observations to absorb')
-                self._absorb_backlog()
+                if self._absorb_slice():
+                    self.replan()
             elif kind == 'end':
                 self.events['end'] += 1
                 if self.planner.active:
@@ -288,26 +292,16 @@ class EstimatorNode(Node):
 
     def on_replan_timer(self) -> None:
         """Covers pauses: replans unless an observation replanned within the last period."""
-        if self._absorb_backlog():
-            return
-        if time.perf_counter() - self._last_replan_wall >= self._replan_period:
+        if self._absorb_slice() or (
+                time.perf_counter() - self._last_replan_wall >= self._replan_period):
             self.replan()
 
-    def _absorb_backlog(self) -> bool:
-        """A slice of the samples held before the onset (backlog_budget s of work); True if
-        that finished them, and then replans on all the evidence."""
+    def _absorb_slice(self) -> bool:
+        """backlog_budget s of the samples held before the onset; True if that was the last."""
         if not self.planner.n_backlog:
             return False
         self.planner.absorb_backlog(self._backlog_budget)
-        if self.planner.n_backlog:
-            return False
-        self.replan()
-        return True
-
-    def _replan_now(self) -> None:
-        self._next_replan = self.planner.t_now + self._replan_period
-        self._last_replan_wall = time.perf_counter()
-        self.replan()
+        return self.planner.n_backlog == 0
 
     def replan(self) -> None:
         """Update the posterior summary, the predicted path and (once committed) the robot's
