@@ -8,10 +8,10 @@ Publishes   /iiwa/joint_trajectory     trajectory_msgs/JointTrajectory, reliable
                 points from the current phase (plus lookahead) to z = 1 with positions,
                 velocities, accelerations, time_from_start = z / alpha* (planning.build_plan).
                 Sent once p(k* | D) >= confidence_threshold with >= min_observations used
-                and the samples held before the onset absorbed, then at replan_rate_hz while new observations arrive (replanned in the
-                callback of the first observation used after each period, so the robot
-                reacts within one observation's latency; a timer covers pauses), and a
-                last time on 'end'.
+                and the samples held before the onset absorbed, then at replan_rate_hz
+                while new observations arrive (replanned in the callback of the first
+                observation used after each period, so the robot reacts within one
+                observation's latency; a timer covers pauses), and a last time on 'end'.
             /estimator/predicted_wrist nav_msgs/Path (frame observed_frame): the whole
                 predicted wrist movement, phases 0..1, pose stamps = onset + z / alpha*.
             /estimator/posterior       std_msgs/Float64MultiArray, one dimension labelled
