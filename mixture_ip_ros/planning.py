@@ -253,7 +253,6 @@ class InteractionPlanner:
         self.plans_sent = 0
         self.plan_failures = 0
         self._held = deque(maxlen=MAX_HELD)   # (stamp ns, y) outside an interaction
-
         self._hold_ns = round(float(hold_window) * 1e9)
         self._backlog = deque()   # (t, y) admitted at the onset, not yet absorbed
         self._max_records = max(1, int(max_records))

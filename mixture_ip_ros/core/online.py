@@ -153,15 +153,18 @@ class OnlineEstimator:
         return k, int(np.argmax(joint[k]))
 
     def _hypothesis(self, component, alpha):
-        """Indices (k, m) of (component, the grid alpha nearest ``alpha``), MAP where None."""
-        if component is None or alpha is None:
-            k_map, m_map = self._map_indices()
-            if component is None:
-                component = k_map
-            if alpha is None:
-                return int(component), (m_map if component == k_map else
-                                        int(np.argmax(self.joint_posterior()[component])))
-        return int(component), int(np.argmin(np.abs(self.alphas - alpha)))
+        """Indices (k, m) of ``component`` (k* if None) and of the grid alpha nearest ``alpha``
+        (that component's MAP alpha if None)."""
+        k = self._map_indices()[0] if component is None else int(component)
+        if alpha is None:
+            return k, int(np.argmax(self.joint_posterior()[k]))
+        return k, int(np.argmin(np.abs(self.alphas - alpha)))
+
+    def _controlled_mean(self, k, mu_o):
+        """Mean of the controlled agent's weights given the observed ones' mean (via B_k)."""
+        prior_mean = self.model.means_[k]
+        do = mu_o.shape[0]
+        return prior_mean[do:] + self._gain[k] @ (mu_o - prior_mean[:do])
 
     def phase(self, t=None):
         """Current phase z = alpha* t under the MAP hypothesis, clamped to [0, 1]."""
@@ -185,12 +188,10 @@ class OnlineEstimator:
         k, m = self._hypothesis(component, alpha)
         a = float(self.alphas[m])
         mu_o, sig_o = self.observed_weights(k, m)
-        do = mu_o.shape[0]
-        prior_mean = self.model.means_[k]
-        B = self._gain[k]
-        mean_c = prior_mean[do:] + B @ (mu_o - prior_mean[:do])
+        mean_c = self._controlled_mean(k, mu_o)
         cov_c = None
         if covariance:
+            B = self._gain[k]
             cov_c = self._cond_cov[k] + B @ sig_o @ B.T
             cov_c = 0.5 * (cov_c + cov_c.T)
         z_grid = np.asarray(z_grid, dtype=float)
@@ -207,11 +208,8 @@ class OnlineEstimator:
         k, m = self._hypothesis(component, alpha)
         a = float(self.alphas[m])
         basis = self.model.basis_
-        mu_o = self.mu[k * len(self.alphas) + m]
-        prior_mean = self.model.means_[k]
-        do = mu_o.shape[0]
-        mean_c = prior_mean[do:] + self._gain[k] @ (mu_o - prior_mean[:do])
-        controlled = mean_trajectory(mean_c.reshape(-1, self.n_basis),
+        mu_o = self.observed_weights(k, m)[0]
+        controlled = mean_trajectory(self._controlled_mean(k, mu_o).reshape(-1, self.n_basis),
                                      np.asarray(z_controlled, dtype=float), basis.centers,
                                      basis.width, a)
         z_o = np.asarray(z_observed, dtype=float)
