@@ -22,7 +22,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'mixture-ip = mixture_ip_ros.cli:main',
+            'mixture-ip = mixture_ip_ros.app.cli:main',
             'sim_node = mixture_ip_ros.nodes.sim_node:main',
             'observer_node = mixture_ip_ros.nodes.observer_node:main',
             'estimator_node = mixture_ip_ros.nodes.estimator_node:main',

@@ -6,19 +6,16 @@ controlled DOFs. Prints one JSON object.
 
 import json
 import os
-import sys
 import time
-from pathlib import Path
 
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'test'))
 
 import numpy as np  # noqa: E402
 
 from mixture_ip_ros.core.mixture import MixtureIProMP  # noqa: E402
 from mixture_ip_ros.core.online import OnlineEstimator  # noqa: E402
 from mixture_ip_ros.core.phase import log_evidence_batch  # noqa: E402
-from synthetic import mixture_demos  # noqa: E402
+from mixture_ip_ros.scenarios.synthetic import mixture_demos  # noqa: E402
 
 
 def naive_update_us(model, alphas, t, Y, reps):

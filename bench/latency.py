@@ -85,14 +85,14 @@ from geometry_msgs.msg import PoseStamped  # noqa: E402
 from nav_msgs.msg import Path as PathMsg  # noqa: E402
 from trajectory_msgs.msg import JointTrajectory  # noqa: E402
 
-from mixture_ip_ros.core.pose_validation import FrameTransform  # noqa: E402
+from mixture_ip_ros.core.frames import FrameTransform  # noqa: E402
 from mixture_ip_ros.core.segmentation import MotionSegmenter  # noqa: E402
-from mixture_ip_ros.data.scenarios import MOCAP_NOISE, box_assembly  # noqa: E402
+from mixture_ip_ros.scenarios.generated import MOCAP_NOISE, box_assembly  # noqa: E402
 from mixture_ip_ros.nodes.estimator_node import EstimatorNode  # noqa: E402
 from mixture_ip_ros.nodes.observer_node import SEGMENTER_DEFAULTS, ObserverNode  # noqa: E402
 from mixture_ip_ros.nodes.spinning import spin_in_thread  # noqa: E402
-from mixture_ip_ros.paths import config_path  # noqa: E402
-from mixture_ip_ros.training import train_to_file  # noqa: E402
+from mixture_ip_ros.core.share import config_path  # noqa: E402
+from mixture_ip_ros.app.training import train_to_file  # noqa: E402
 
 BIN = Path(sys.executable).parent
 BASE_NS = 1000 * 1_000_000_000      # synthetic stamp clock starts at 1000 s

@@ -10,12 +10,9 @@ JSON object.
 
 import json
 import os
-import sys
 import time
-from pathlib import Path
 
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'test'))
 
 from builtin_interfaces.msg import Duration  # noqa: E402
 import numpy as np  # noqa: E402
@@ -25,9 +22,9 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint  # noqa: E
 from mixture_ip_ros.core.mixture import MixtureIProMP  # noqa: E402
 from mixture_ip_ros.core.online import OnlineEstimator  # noqa: E402
 from mixture_ip_ros.nodes.cdr import JointTrajectoryEncoder  # noqa: E402
-from mixture_ip_ros.planning import build_plan  # noqa: E402
-from mixture_ip_ros.training import JOINT_NAMES  # noqa: E402
-from synthetic import mixture_demos  # noqa: E402
+from mixture_ip_ros.estimation.planning import build_plan  # noqa: E402
+from mixture_ip_ros.robot.description import JOINT_NAMES  # noqa: E402
+from mixture_ip_ros.scenarios.synthetic import mixture_demos  # noqa: E402
 
 N_POINTS = 25
 LOOKAHEAD = 0.1

@@ -34,7 +34,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 import pinocchio  # noqa: E402
 
-from mixture_ip_ros.robot.kinematics import JOINT_NAMES  # noqa: E402
+from mixture_ip_ros.robot.description import JOINT_NAMES  # noqa: E402
 from mixture_ip_ros.robot.sim import IiwaSimulation  # noqa: E402
 from mixture_ip_ros.robot.trajectory import points_from_arrays  # noqa: E402
 
@@ -167,7 +167,7 @@ def bench_executable(seconds: float):
     """The sim_node executable in its own process (config/sim.yaml), observed over DDS."""
     import rclpy
 
-    from mixture_ip_ros.paths import config_path
+    from mixture_ip_ros.core.share import config_path
 
     domain = 190 + os.getpid() % 40
     proc = subprocess.Popen(

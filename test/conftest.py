@@ -10,11 +10,17 @@ import pytest  # noqa: E402
 
 
 def private_domain_id(offset: int = 0) -> int:
-    """A domain id unlikely to collide with another run on this machine: 100-159, plus
-    ``offset`` (< 70) for a second domain in the same test. Fast DDS allows 0-232 only."""
-    if not 0 <= offset < 70:
-        raise ValueError('offset must be in [0, 70)')
-    return 100 + os.getpid() % 60 + offset
+    """A domain id unlikely to collide with another run on this machine: 40 ids from
+    MIXTURE_IP_TEST_DOMAIN_BASE (default 100; give parallel checkouts disjoint bases), picked by
+    the process id, plus ``offset`` (0 or 1) for a second domain in the same test. Fast DDS
+    allows 0-232 only."""
+    if offset not in (0, 1):
+        raise ValueError('offset must be 0 or 1')
+    base = int(os.environ.get('MIXTURE_IP_TEST_DOMAIN_BASE', 100))
+    domain = base + (os.getpid() % 20) * 2 + offset
+    if not (0 <= base and domain <= 232):
+        raise ValueError(f'MIXTURE_IP_TEST_DOMAIN_BASE={base} gives domain {domain}, outside 0-232')
+    return domain
 
 
 @pytest.fixture

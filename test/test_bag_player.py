@@ -12,9 +12,9 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from conftest import private_domain_id
-from mixture_ip_ros.data.bags import BagError, DEFAULT_START_TIME_NS, write_demonstration_bag
+from mixture_ip_ros.io.bags import BagError, DEFAULT_START_TIME_NS, write_demonstration_bag
 from mixture_ip_ros.nodes.bag_player import BagPlayer, main, parse_remaps
-from mixture_ip_ros.paths import config_path
+from mixture_ip_ros.core.share import config_path
 
 
 @pytest.fixture
@@ -209,7 +209,7 @@ def test_main_plays_to_the_end_and_reports_bad_bags(bag, tmp_path, monkeypatch):
 
 def test_undecodable_message_is_dropped_not_fatal(ros_context, tmp_path):
     from rosbags.rosbag2 import Writer
-    from mixture_ip_ros.data.bags import typestore
+    from mixture_ip_ros.io.bags import typestore
     ts = typestore()
     T = ts.types
     writer = Writer(tmp_path / 'b', version=9)

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 import yaml
 
-from mixture_ip_ros.data.bags import (DEFAULT_START_TIME_NS, JOINT_NAMES, LABEL_KEY, BagError,
+from mixture_ip_ros.robot.description import JOINT_NAMES
+from mixture_ip_ros.io.bags import (DEFAULT_START_TIME_NS, LABEL_KEY, BagError,
                                       bag_topics, read_bag, read_messages, typestore,
                                       write_demonstration_bag)
 

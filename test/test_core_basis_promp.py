@@ -9,7 +9,7 @@ from mixture_ip_ros.core.promp import (ProMP, observation_stats, ridge_weights,
                                        weight_posterior)
 from scipy import linalg
 
-from synthetic import random_spd, sample_trajectory
+from mixture_ip_ros.scenarios.synthetic import random_spd, sample_trajectory
 
 
 def test_basis_is_normalized_and_derivatives_match_finite_differences():

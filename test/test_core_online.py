@@ -10,7 +10,7 @@ from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.core.phase import (alpha_prior_from_durations, log_evidence_batch,
                                        phase_posterior_batch)
 
-from synthetic import mixture_demos, random_spd, sample_trajectory
+from mixture_ip_ros.scenarios.synthetic import mixture_demos, random_spd, sample_trajectory
 
 
 @pytest.fixture(scope='module')

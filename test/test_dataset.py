@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from mixture_ip_ros.data.bags import BagError, write_demonstration_bag
-from mixture_ip_ros.data.dataset import (FrameTransform, find_bags, load_dataset,
+from mixture_ip_ros.io.bags import BagError, write_demonstration_bag
+from mixture_ip_ros.core.frames import FrameTransform
+from mixture_ip_ros.io.dataset import (find_bags, load_dataset,
                                          load_demonstration, resample_wrist)
 
 REST0, MOVE, REST1 = 0.4, 1.5, 0.6
@@ -45,8 +46,8 @@ def _bag(path, rate=100.0, gap=None, joint_t=None, transform=TF, **kw):
 def test_frame_transform_matches_scipy():
     p = np.random.default_rng(1).normal(size=(10, 3))
     R = Rotation.from_quat(TF.quaternion)
-    np.testing.assert_allclose(TF.apply(p), R.apply(p) + TF.translation, atol=1e-12)
-    with pytest.raises(ValueError, match='unit norm'):
+    np.testing.assert_allclose(TF.apply_array(p), R.apply(p) + TF.translation, atol=1e-12)
+    with pytest.raises(ValueError, match='not unit length'):
         FrameTransform(quaternion=(0, 0, 0, 2))
 
 
@@ -144,7 +145,7 @@ def test_load_dataset_skips_or_raises_on_a_bad_bag(tmp_path, caplog):
     (tmp_path / 'labels.json').write_text('{}')
     (tmp_path / 'plots').mkdir()
     assert [p.name for p in find_bags(tmp_path)] == ['demo_0', 'demo_1', 'demo_2', 'demo_bad']
-    with caplog.at_level(logging.WARNING, logger='mixture_ip_ros.data.dataset'):
+    with caplog.at_level(logging.WARNING, logger='mixture_ip_ros.io.dataset'):
         demos, skipped = load_dataset(tmp_path, transform=TF)
     assert [d.label for d in demos] == ['p0', 'p1', 'p2']
     assert len(skipped) == 1 and skipped[0].path.name == 'demo_bad'

@@ -22,12 +22,13 @@ from trajectory_msgs.msg import JointTrajectory
 
 from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.online import OnlineEstimator
-from mixture_ip_ros.data.model_file import load_model, save_model
+from mixture_ip_ros.io.model_file import load_model, save_model
 from mixture_ip_ros.nodes.estimator_node import EstimatorNode
-from mixture_ip_ros.training import JOINT_NAMES, train_to_file
+from mixture_ip_ros.app.training import train_to_file
+from mixture_ip_ros.robot.description import JOINT_NAMES
 
 from conftest import private_domain_id
-from synthetic import mixture_demos
+from mixture_ip_ros.scenarios.synthetic import mixture_demos
 
 HELD_OUT = (0, 13, 30)
 ONSET_NS = 1_000_000_000_000          # observation stamps: onset + t
@@ -392,7 +393,7 @@ def test_main_exits_non_zero_with_a_message_and_no_traceback(tmp_path):
 def test_config_file_declares_the_defaults(ros_context, trained):
     """config/estimator.yaml loads as a params file and documents exactly the defaults."""
     import yaml
-    from mixture_ip_ros.paths import config_path
+    from mixture_ip_ros.core.share import config_path
     path = config_path('estimator.yaml')
     values = yaml.safe_load(path.read_text())['estimator_node']['ros__parameters']
     assert values['model_path'] == ''

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from matplotlib import image as mpimg
 
-from mixture_ip_ros.data import scenarios
-from mixture_ip_ros.evaluation import EvalConfig, evaluate, prepare
+from mixture_ip_ros.scenarios import generated as scenarios
+from mixture_ip_ros.app.evaluation import EvalConfig, evaluate, prepare
 
 # Thesis 3.4.2: hand position error, mean (cm), leave-one-out.
 THESIS_HAND_ERROR_CM = {'plate': 3.2, 'screwdriver': 2.1}

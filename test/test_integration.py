@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from conftest import private_domain_id
-from mixture_ip_ros.data.scenarios import read_labels, write_scenario_bags
+from mixture_ip_ros.scenarios.generated import read_labels, write_scenario_bags
 
 pytestmark = pytest.mark.filterwarnings('ignore::DeprecationWarning')
 
@@ -23,10 +23,10 @@ pytestmark = pytest.mark.filterwarnings('ignore::DeprecationWarning')
 @pytest.fixture(scope='module')
 def setup(tmp_path_factory):
     """48 box-assembly bags; a model trained (K = 3) on all but one interaction per pattern."""
-    from mixture_ip_ros.data.dataset import load_demonstration
-    from mixture_ip_ros.demo import demonstrated_target, split_held_out
+    from mixture_ip_ros.io.dataset import load_demonstration
+    from mixture_ip_ros.app.demo import demonstrated_target, split_held_out
     from mixture_ip_ros.robot.kinematics import IiwaKinematics
-    from mixture_ip_ros.training import train_to_file
+    from mixture_ip_ros.app.training import train_to_file
     root = tmp_path_factory.mktemp('closed_loop')
     data = root / 'bags'
     write_scenario_bags('box_assembly', data, seed=3)
@@ -41,7 +41,7 @@ def setup(tmp_path_factory):
 
 @pytest.fixture(scope='module')
 def loop(setup):
-    from mixture_ip_ros.system import ClosedLoop
+    from mixture_ip_ros.app.closed_loop import ClosedLoop
     system = ClosedLoop(setup['model'], domain_id=private_domain_id())
     yield system
     system.close()
@@ -163,7 +163,7 @@ def test_cross_process_one_interaction(setup, tmp_path):
     from rclpy.executors import SingleThreadedExecutor
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
-    domain = private_domain_id(offset=60)
+    domain = private_domain_id(offset=1)
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), OPENBLAS_NUM_THREADS='1',
                ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     bindir = Path(sys.executable).parent

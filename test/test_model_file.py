@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from mixture_ip_ros.core.mixture import MixtureIProMP
-from mixture_ip_ros.data.model_file import ModelFileError, load_model, save_model
+from mixture_ip_ros.io.model_file import ModelFileError, load_model, save_model
 
-from synthetic import mixture_demos
+from mixture_ip_ros.scenarios.synthetic import mixture_demos
 
 OBS = ['wrist_x', 'wrist_y', 'wrist_z']
 CTRL = [f'iiwa_joint_{i}' for i in range(1, 5)]

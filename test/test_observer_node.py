@@ -7,8 +7,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from mixture_ip_ros.core.pose_validation import (
-    check_pose, FrameTransform, ns_to_stamp, quaternion_to_matrix, REJECT_REASONS, stamp_to_ns)
+from mixture_ip_ros.core.frames import FrameTransform, quaternion_to_matrix
+from mixture_ip_ros.core.stamps import ns_to_parts as ns_to_stamp
+from mixture_ip_ros.estimation.pose_check import POSE_REJECT_REASONS as REJECT_REASONS, check_pose
+
+
+def stamp_to_ns(sec, nanosec):
+    return sec * 1_000_000_000 + nanosec
 from mixture_ip_ros.core.segmentation import segment_motion
 
 T0_NS = 1_700_000_000_123_456_789  # an epoch stamp with nanoseconds, like real mocap
@@ -216,7 +221,7 @@ def test_params_file_matches_declared_defaults(ros_context):
     import yaml
 
     from mixture_ip_ros.nodes.observer_node import ObserverNode
-    from mixture_ip_ros.paths import config_path
+    from mixture_ip_ros.core.share import config_path
     path = config_path('observer.yaml')
     params = yaml.safe_load(path.read_text())['observer_node']['ros__parameters']
     node = ObserverNode(context=ros_context,

@@ -5,13 +5,13 @@ import numpy as np
 import pytest
 
 from mixture_ip_ros.core.online import OnlineEstimator
-from mixture_ip_ros.data.model_file import load_model
-from mixture_ip_ros.planning import (
+from mixture_ip_ros.io.model_file import load_model
+from mixture_ip_ros.estimation.planning import (
     InteractionPlanner, LatencyStats, Plan, build_plan, check_plan, posterior_summary,
     predicted_wrist, should_commit, summary_labels)
-from mixture_ip_ros.training import train_to_file
+from mixture_ip_ros.app.training import train_to_file
 
-from synthetic import mixture_demos
+from mixture_ip_ros.scenarios.synthetic import mixture_demos
 
 HELD_OUT = (0, 13, 30)   # one demonstration of each pattern, not used for training
 
@@ -402,7 +402,7 @@ def test_plans_pass_the_controllers_trajectory_acceptance(trained):
     at rest at the end, not over before 'now' (start = onset, now = the latest observation
     plus some delivery latency)."""
     from mixture_ip_ros.robot.trajectory import points_from_arrays, validate_trajectory
-    from mixture_ip_ros.training import JOINT_NAMES
+    from mixture_ip_ros.robot.description import JOINT_NAMES
     model, _, held = trained
     demo = held[0]
     est = OnlineEstimator(model)
@@ -452,7 +452,7 @@ def test_interaction_records_are_bounded(trained):
 
 def test_catch_up_drops_points_the_robot_cannot_reach_in_time(trained):
     """A robot far from the plan gets a later first point, reachable at catch_up_velocity."""
-    from mixture_ip_ros.planning import build_plan
+    from mixture_ip_ros.estimation.planning import build_plan
     model, meta, demos = trained
     est = OnlineEstimator(model, n_alpha=10, min_interval=0.0)
     demo = demos[0]

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from mixture_ip_ros import render
-from mixture_ip_ros.data.human import reach
-from mixture_ip_ros.record import InteractionRecord
-from mixture_ip_ros.robot import human
-from mixture_ip_ros.robot.kinematics import JOINT_NAMES
+from mixture_ip_ros.viz import render
+from mixture_ip_ros.scenarios.human_motion import reach
+from mixture_ip_ros.io.records import InteractionRecord
+from mixture_ip_ros.viz import human_model as human
+from mixture_ip_ros.robot.description import JOINT_NAMES
 from mixture_ip_ros.robot.sim import HOME, IiwaSimulation
 from mixture_ip_ros.robot.trajectory import points_from_arrays
 
@@ -216,7 +216,7 @@ def test_unavailable_rendering_raises_runtime_error(tmp_path):
     code = (
         'import sys; sys.path.insert(0, %r)\n'
         'from test_render import make_record\n'
-        'from mixture_ip_ros import render\n'
+        'from mixture_ip_ros.viz import render\n'
         'ok, why = render.rendering_available()\n'
         'assert not ok and "PYOPENGL_PLATFORM" in why, why\n'
         'try:\n'

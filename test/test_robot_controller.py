@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from mixture_ip_ros.robot.controller import ComputedTorqueController, default_gains
-from mixture_ip_ros.robot.kinematics import JOINT_NAMES, IiwaKinematics
+from mixture_ip_ros.robot.description import JOINT_NAMES
+from mixture_ip_ros.robot.kinematics import IiwaKinematics
 from mixture_ip_ros.robot.sim import HOME, IiwaSimulation
 from mixture_ip_ros.robot.trajectory import points_from_arrays
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from mixture_ip_ros.robot.kinematics import JOINT_NAMES
+from mixture_ip_ros.robot.description import JOINT_NAMES
 from mixture_ip_ros.robot.sim import HOME, IiwaSimulation
 from mixture_ip_ros.robot.trajectory import (JointTrajectory, TrajectoryFollower, TrajectoryPoint,
                                              points_from_arrays, validate_trajectory)

@@ -7,9 +7,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from mixture_ip_ros.data import scenarios as S
-from mixture_ip_ros.data.bags import read_bag
-from mixture_ip_ros.data.dataset import load_dataset
+from mixture_ip_ros.scenarios import generated as S
+from mixture_ip_ros.io.bags import read_bag
+from mixture_ip_ros.io.dataset import load_dataset
 from mixture_ip_ros.robot.kinematics import IiwaKinematics
 from mixture_ip_ros.robot.scene import POLE_HEIGHT, POLE_RADIUS, POLE_XY
 

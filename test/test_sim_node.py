@@ -22,8 +22,9 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from conftest import private_domain_id
 from mixture_ip_ros.nodes.sim_node import SimNode
-from mixture_ip_ros.paths import config_path
-from mixture_ip_ros.robot.kinematics import JOINT_NAMES, IiwaKinematics
+from mixture_ip_ros.core.share import config_path
+from mixture_ip_ros.robot.description import JOINT_NAMES
+from mixture_ip_ros.robot.kinematics import IiwaKinematics
 from mixture_ip_ros.robot.sim import HOME
 
 RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
@@ -116,7 +117,7 @@ def test_bad_trajectories_are_rejected_and_counted(harness):
     sim = harness.sim_node.sim
     harness.spin_until(lambda: harness.pub.get_subscription_count() > 0 and harness.joint_states)
     harness.spin_until(lambda: sim.time > 1.0)
-    harness.pub.publish(_trajectory(HOME, 1.0, names=JOINT_NAMES[:6] + ['wrist']))
+    harness.pub.publish(_trajectory(HOME, 1.0, names=list(JOINT_NAMES[:6]) + ['wrist']))
     harness.pub.publish(_trajectory([float('nan')] * 7, 1.0))
     # Stamped at t = 0.2 s, ends at 0.7 s: in the past once the simulation is past 1 s.
     harness.pub.publish(_trajectory(HOME + 0.1, 0.5, stamp=Time(sec=0, nanosec=200_000_000)))

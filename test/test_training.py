@@ -3,9 +3,9 @@
 import numpy as np
 
 from mixture_ip_ros.core.demonstration import Demonstration
-from mixture_ip_ros.training import train
+from mixture_ip_ros.app.training import train
 
-from synthetic import mixture_demos
+from mixture_ip_ros.scenarios.synthetic import mixture_demos
 
 
 def test_em_training_chooses_k_on_regression_fits_and_fits_the_model_by_em():

@@ -31,7 +31,7 @@ from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
 from builtin_interfaces.msg import Time
 
-from mixture_ip_ros.data.bags import BagError, read_messages
+from mixture_ip_ros.io.bags import BagError, read_messages
 from mixture_ip_ros.nodes.spinning import spin_until_shutdown
 
 

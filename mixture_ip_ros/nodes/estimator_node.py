@@ -47,13 +47,13 @@ from std_msgs.msg import Float64MultiArray, Header, MultiArrayDimension
 from trajectory_msgs.msg import JointTrajectory
 
 from mixture_ip_ros.core.online import OnlineEstimator
-from mixture_ip_ros.data.model_file import load_model
+from mixture_ip_ros.io.model_file import load_model
+from mixture_ip_ros.robot.description import JOINT_NAMES
 from mixture_ip_ros.nodes.cdr import JointTrajectoryEncoder, PathEncoder
 from mixture_ip_ros.nodes.spinning import spin_until_shutdown
-from mixture_ip_ros.planning import (
+from mixture_ip_ros.estimation.planning import (
     InteractionPlanner, LatencyStats, predicted_wrist, summary_labels)
 
-JOINT_NAMES = [f'iiwa_joint_{i}' for i in range(1, 8)]
 N_OBSERVED = 3   # a PointStamped carries x, y, z
 
 
@@ -78,7 +78,7 @@ class EstimatorNode(Node):
         self.declare_parameter('trajectory_topic', '/iiwa/joint_trajectory')
         self.declare_parameter('path_topic', '/estimator/predicted_wrist')
         self.declare_parameter('posterior_topic', '/estimator/posterior')
-        self.declare_parameter('joint_names', JOINT_NAMES)
+        self.declare_parameter('joint_names', list(JOINT_NAMES))
         self.declare_parameter('observed_frame', 'iiwa_link_0')
         self.declare_parameter('n_alpha', 50)
         self.declare_parameter('min_interval', 0.05)

@@ -26,8 +26,9 @@ from rclpy.qos import (
     DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy)
 from std_msgs.msg import Header
 
-from mixture_ip_ros.core.pose_validation import (
-    check_pose, FrameTransform, ns_to_stamp, REJECT_REASONS)
+from mixture_ip_ros.core.frames import FrameTransform
+from mixture_ip_ros.core.stamps import ns_to_parts, stamp_to_ns
+from mixture_ip_ros.estimation.pose_check import check_pose, POSE_REJECT_REASONS
 from mixture_ip_ros.core.segmentation import Event, MotionSegmenter
 from mixture_ip_ros.nodes.spinning import spin_until_shutdown
 
@@ -71,7 +72,7 @@ class ObserverNode(Node):
         self._gap_timeout = self.segmenter.gap_timeout
 
         # Counters for monitoring and tests.
-        self.drop_counts = {reason: 0 for reason in REJECT_REASONS}
+        self.drop_counts = {reason: 0 for reason in POSE_REJECT_REASONS}
         self.accepted = 0
         self.published = {'observations': 0, 'onset': 0, 'end': 0, 'gap': 0}
         self.stream_restarts = 0
@@ -124,7 +125,7 @@ class ObserverNode(Node):
     # -- logic --------------------------------------------------------------------------
     def _handle_pose(self, msg: PoseStamped) -> None:
         stamp = msg.header.stamp
-        stamp_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        stamp_ns = stamp_to_ns(stamp)
         p = msg.pose.position
         q = msg.pose.orientation
         position = (p.x, p.y, p.z)
@@ -186,7 +187,7 @@ class ObserverNode(Node):
                 self.moving = ev.kind == 'onset'
 
     def _to_stamp(self, t: float) -> Time:
-        sec, nanosec = ns_to_stamp(self._t_ref_ns + round(t * 1e9))
+        sec, nanosec = ns_to_parts(self._t_ref_ns + round(t * 1e9))
         return Time(sec=sec, nanosec=nanosec)
 
     def _log_drop(self, text: str) -> None:

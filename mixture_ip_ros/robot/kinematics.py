@@ -7,12 +7,9 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from mixture_ip_ros.paths import model_path
+from mixture_ip_ros.core.share import model_path
 
-JOINT_NAMES = [f'iiwa_joint_{i}' for i in range(1, 8)]
-BASE_FRAME = 'iiwa_link_0'
-FLANGE_FRAME = 'tool0'
-URDF_NAME = 'iiwa14.urdf'
+from mixture_ip_ros.robot.description import FLANGE_FRAME, JOINT_NAMES, URDF_NAME
 
 
 def _as_q(q, name='q') -> np.ndarray:
@@ -37,7 +34,7 @@ class IiwaKinematics:
             raise ValueError(f'mass_scale must be a positive number, got {mass_scale}')
         self.model = pin.buildModelFromUrdf(str(path))
         names = [self.model.names[i] for i in range(1, self.model.njoints)]
-        if names != JOINT_NAMES:
+        if names != list(JOINT_NAMES):
             raise ValueError(f'{path} has joints {names}, expected {JOINT_NAMES}')
         if mass_scale != 1.0:
             for i in range(1, self.model.njoints):

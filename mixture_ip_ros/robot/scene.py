@@ -11,8 +11,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from mixture_ip_ros.paths import model_path
-from mixture_ip_ros.robot.kinematics import FLANGE_FRAME, JOINT_NAMES, URDF_NAME
+from mixture_ip_ros.core.share import model_path
+from mixture_ip_ros.robot.description import FLANGE_FRAME, JOINT_NAMES, URDF_NAME
 
 TIMESTEP = 0.001
 TABLE_TOP_Z = 0.0

@@ -9,7 +9,8 @@ import mujoco
 import numpy as np
 
 from mixture_ip_ros.robot.controller import DEFAULT_NATURAL_FREQUENCY, ComputedTorqueController
-from mixture_ip_ros.robot.kinematics import JOINT_NAMES, IiwaKinematics
+from mixture_ip_ros.robot.description import JOINT_NAMES
+from mixture_ip_ros.robot.kinematics import IiwaKinematics
 from mixture_ip_ros.robot.scene import FLANGE_SITE, HUMAN_WRIST, build_scene
 from mixture_ip_ros.robot.trajectory import (TrajectoryFollower, TrajectoryPoint,
                                              validate_trajectory)

@@ -22,7 +22,7 @@ from mixture_ip_ros.nodes.observer_node import ObserverNode
 from mixture_ip_ros.nodes.recorder import InteractionRecorder
 from mixture_ip_ros.nodes.sim_node import SimNode
 from mixture_ip_ros.nodes.spinning import spin_in_thread
-from mixture_ip_ros.record import InteractionRecord
+from mixture_ip_ros.io.records import InteractionRecord
 from mixture_ip_ros.robot.kinematics import IiwaKinematics
 
 

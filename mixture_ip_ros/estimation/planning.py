@@ -28,8 +28,8 @@ from typing import Optional
 import numpy as np
 
 STATES = ('idle', 'observing', 'committed', 'done')
-# Why an observation was not used (beyond 'skipped': within min_interval of the last one used).
-REJECT_REASONS = ('wrong_frame', 'non_finite', 'before_onset',
+# Why the estimator did not use an observation (beyond 'skipped': within min_interval of the last one used).
+OBSERVATION_REJECT_REASONS = ('wrong_frame', 'non_finite', 'before_onset',
                   'time_backwards', 'exception', 'bad_joint_state')
 MAX_HELD = 20_000   # held observations at most (2.5 s at 8 kHz), whatever their stamps
 PHASE_EPS = 1e-6
@@ -249,7 +249,7 @@ class InteractionPlanner:
         self.received = 0
         self.used = 0
         self.skipped = 0
-        self.rejected = {reason: 0 for reason in REJECT_REASONS}
+        self.rejected = {reason: 0 for reason in OBSERVATION_REJECT_REASONS}
         self.plans_sent = 0
         self.plan_failures = 0
         self._held = deque(maxlen=MAX_HELD)   # (stamp ns, y) outside an interaction

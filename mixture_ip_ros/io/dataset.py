@@ -19,68 +19,19 @@ Frames: ``transform`` is the pose of the mocap world frame in the robot base fra
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple, Optional, Sequence
 
 import numpy as np
 
 from mixture_ip_ros.core.demonstration import Demonstration
+from mixture_ip_ros.core.frames import FrameTransform
 from mixture_ip_ros.core.segmentation import segment_motion
-from mixture_ip_ros.data.bags import (JOINT_NAMES, JOINT_TOPIC, WRIST_TOPIC, BagError,
+from mixture_ip_ros.robot.description import JOINT_NAMES
+from mixture_ip_ros.io.bags import (JOINT_TOPIC, WRIST_TOPIC, BagError,
                                       RawRecording, read_bag)
 
 logger = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class FrameTransform:
-    """Rigid transform p_to = R(quaternion) p_from + translation; quaternion (x, y, z, w)."""
-
-    translation: tuple = (0.0, 0.0, 0.0)
-    quaternion: tuple = (0.0, 0.0, 0.0, 1.0)
-
-    def __post_init__(self):
-        t = np.asarray(self.translation, dtype=float)
-        q = np.asarray(self.quaternion, dtype=float)
-        if t.shape != (3,) or not np.all(np.isfinite(t)):
-            raise ValueError(f'transform translation must be 3 finite numbers, got {self.translation!r}')
-        if q.shape != (4,) or not np.all(np.isfinite(q)):
-            raise ValueError(f'transform quaternion must be 4 finite numbers (x, y, z, w), '
-                             f'got {self.quaternion!r}')
-        n = np.linalg.norm(q)
-        if abs(n - 1.0) > 1e-3:
-            raise ValueError(f'transform quaternion must have unit norm, got norm {n:.6f}')
-        object.__setattr__(self, 'translation', tuple(float(v) for v in t))
-        object.__setattr__(self, 'quaternion', tuple(float(v) for v in q / n))
-
-    @property
-    def rotation_matrix(self) -> np.ndarray:
-        x, y, z, w = self.quaternion
-        return np.array([
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ])
-
-    def apply(self, points: np.ndarray) -> np.ndarray:
-        """Transform (N, 3) points; NaN rows stay NaN."""
-        points = np.asarray(points, dtype=float)
-        return points @ self.rotation_matrix.T + np.asarray(self.translation)
-
-
-def as_transform(transform) -> FrameTransform:
-    """Accept None (identity), a FrameTransform, or (translation, quaternion_xyzw)."""
-    if transform is None:
-        return FrameTransform()
-    if isinstance(transform, FrameTransform):
-        return transform
-    try:
-        translation, quaternion = transform
-    except (TypeError, ValueError):
-        raise ValueError('transform must be None, a FrameTransform or (translation, quaternion_xyzw), '
-                         f'got {transform!r}') from None
-    return FrameTransform(tuple(np.ravel(translation)), tuple(np.ravel(quaternion)))
 
 
 def resample_wrist(t_src: np.ndarray, xyz_src: np.ndarray, t_query: np.ndarray,
@@ -135,8 +86,8 @@ def recording_to_demonstration(rec: RawRecording, *, transform=None, dt: float =
         raise ValueError(f'gap_tolerance must be >= 0.5 (in sample periods), got {gap_tolerance!r}')
     if wrist_frame is not None and rec.wrist_frame != wrist_frame:
         raise BagError(source, f'wrist poses are in frame {rec.wrist_frame!r}, expected {wrist_frame!r}')
-    tf = as_transform(transform)
-    xyz = tf.apply(rec.wrist_xyz)
+    tf = FrameTransform.from_any(transform)
+    xyz = tf.apply_array(rec.wrist_xyz)
     valid = ~np.isnan(xyz).any(axis=1)
     if valid.sum() < 2:
         raise BagError(source, 'fewer than 2 valid wrist samples')

@@ -8,7 +8,7 @@ _PACKAGE = 'mixture_ip_ros'
 
 def share_dir() -> Path:
     """The checkout root when running from source, else <prefix>/share/mixture_ip_ros."""
-    checkout = Path(__file__).resolve().parents[1]
+    checkout = Path(__file__).resolve().parents[2]
     if (checkout / 'package.xml').is_file():
         return checkout
     return Path(sys.prefix) / 'share' / _PACKAGE

@@ -29,11 +29,13 @@ from typing import Mapping, Optional, Sequence
 import numpy as np
 import yaml
 
+from mixture_ip_ros.core.stamps import ns_to_parts, stamp_to_ns
+from mixture_ip_ros.robot.description import JOINT_NAMES
+
 WRIST_TOPIC = '/mocap/wrist'
 JOINT_TOPIC = '/joint_states'
 WRIST_TYPE = 'geometry_msgs/msg/PoseStamped'
 JOINT_TYPE = 'sensor_msgs/msg/JointState'
-JOINT_NAMES = tuple(f'iiwa_joint_{i}' for i in range(1, 8))
 LABEL_KEY = 'mixture_ip_ros.label'
 STORAGES = ('mcap', 'sqlite3')
 BAG_VERSION = 9
@@ -199,7 +201,7 @@ def write_demonstration_bag(path, wrist_t, wrist_xyz, joint_t, joint_q, *,
         ns = int(ns)
         p, q = wrist_xyz[k], wrist_quat[k]
         msg = PoseStamped(
-            header=Header(stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id=frame_id),
+            header=Header(stamp=Time(*ns_to_parts(ns)), frame_id=frame_id),
             pose=Pose(position=Point(x=float(p[0]), y=float(p[1]), z=float(p[2])),
                       orientation=Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]),
                                              w=float(q[3]))))
@@ -207,7 +209,7 @@ def write_demonstration_bag(path, wrist_t, wrist_xyz, joint_t, joint_q, *,
     for k, ns in enumerate(_stamp_ns(start_time_ns, joint_t)):
         ns = int(ns)
         msg = JointState(
-            header=Header(stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id=''),
+            header=Header(stamp=Time(*ns_to_parts(ns)), frame_id=''),
             name=list(joint_names), position=joint_q[k].copy(),
             velocity=joint_qd[k].copy() if joint_qd is not None else empty, effort=empty)
         records.append((ns, 1, 'joint', ts.serialize_cdr(msg, JOINT_TYPE)))
@@ -328,7 +330,7 @@ def _find_connection(path, conns, topic, msgtype):
 
 
 def _stamp_or_log(stamp, log_ns: int) -> int:
-    ns = int(stamp.sec) * 10**9 + int(stamp.nanosec)
+    ns = stamp_to_ns(stamp)
     return ns if ns > 0 else log_ns
 
 

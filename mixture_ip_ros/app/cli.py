@@ -8,15 +8,15 @@ from pathlib import Path
 
 
 def _generate(args):
-    from mixture_ip_ros.data.scenarios import write_scenario_bags
+    from mixture_ip_ros.scenarios.generated import write_scenario_bags
     bags = write_scenario_bags(args.scenario, Path(args.out), seed=args.seed,
                                occlusion=args.occlusion, storage=args.storage)
     print(f'wrote {len(bags)} {args.scenario} demonstrations ({args.storage} bags) to {args.out}')
 
 
 def _train(args):
-    from mixture_ip_ros.data.dataset import load_dataset
-    from mixture_ip_ros.training import text_progress, train_to_file
+    from mixture_ip_ros.io.dataset import load_dataset
+    from mixture_ip_ros.app.training import text_progress, train_to_file
     demos, skipped = load_dataset(args.bag_dir, on_error=args.on_error)
     for s in skipped:
         print(f'skipped {s.path}: {s.reason}', file=sys.stderr)
@@ -31,14 +31,14 @@ def _train(args):
 
 
 def _evaluate(args):
-    from mixture_ip_ros.evaluation import evaluate
+    from mixture_ip_ros.app.evaluation import evaluate
     metrics = evaluate(args.scenario, Path(args.out), seed=args.seed, quick=args.quick,
                        bag_dir=args.bags)
     print(json.dumps(metrics, indent=1))
 
 
 def _demo(args):
-    from mixture_ip_ros.demo import run_demo
+    from mixture_ip_ros.app.demo import run_demo
     run_demo(args)
 
 

@@ -1,4 +1,5 @@
-"""Sampled test data with known generating parameters (the oracle for the learners)."""
+"""Sampled interaction demonstrations with known generating parameters: the oracle the learners
+are tested and benchmarked against."""
 
 import numpy as np
 

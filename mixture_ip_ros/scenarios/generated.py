@@ -51,8 +51,8 @@ from typing import NamedTuple, Optional
 import numpy as np
 
 from mixture_ip_ros.core.demonstration import Demonstration
-from mixture_ip_ros.data import human
-from mixture_ip_ros.data.dataset import resample_wrist
+from mixture_ip_ros.scenarios import human_motion as human
+from mixture_ip_ros.io.dataset import resample_wrist
 
 LABEL_FILE = 'labels.json'
 HUMAN_REST = np.array([1.22, 0.24, 0.08])
@@ -551,7 +551,7 @@ def write_scenario_bags(scenario: str, out_dir, seed: int = 0, occlusion: float 
     ``out_dir`` must not exist or be empty. Returns the bag paths. labels.json maps bag name to
     label and records the scenario and seed; the label is also in each bag's metadata custom_data.
     """
-    from mixture_ip_ros.data.bags import write_demonstration_bag
+    from mixture_ip_ros.io.bags import write_demonstration_bag
     out = Path(out_dir)
     if out.exists() and any(out.iterdir()):
         raise ValueError(f'{out} is not empty; refusing to mix demonstration sets')

@@ -28,9 +28,9 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 from PIL import Image, ImageDraw, ImageFont  # noqa: E402
 
-from mixture_ip_ros.record import InteractionRecord  # noqa: E402
-from mixture_ip_ros.robot import human as human_model  # noqa: E402
-from mixture_ip_ros.robot.kinematics import JOINT_NAMES  # noqa: E402
+from mixture_ip_ros.io.records import InteractionRecord  # noqa: E402
+from mixture_ip_ros.viz import human_model  # noqa: E402
+from mixture_ip_ros.robot.description import JOINT_NAMES  # noqa: E402
 from mixture_ip_ros.robot.scene import HUMAN_WRIST, build_spec  # noqa: E402
 
 # Component colours (overlay bars, timeline); the k-th label gets the k-th colour.

@@ -28,7 +28,7 @@ from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.core.interaction import trajectory_distribution
 from mixture_ip_ros.core.mixture import MixtureIProMP, controlled_rms, select_n_components
 from mixture_ip_ros.core.online import OnlineEstimator
-from mixture_ip_ros.training import component_labels
+from mixture_ip_ros.app.training import component_labels
 
 logger = logging.getLogger(__name__)
 
@@ -101,7 +101,7 @@ def evaluate(scenario: str, out_dir: Path, seed: int = 0, quick: bool = False, *
                          'bag_dir/demos are for box_assembly and pole')
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    from mixture_ip_ros.data import scenarios as scen
+    from mixture_ip_ros.scenarios import generated as scen
     t0 = time.perf_counter()
     if scenario in ('box_assembly', 'pole'):
         if bag_dir is not None:
@@ -134,8 +134,8 @@ def evaluate(scenario: str, out_dir: Path, seed: int = 0, quick: bool = False, *
 def load_labelled_bags(bag_dir):
     """(demonstrations, skipped bags) from a folder of bags; labels from the bags' metadata or
     the folder's labels.json."""
-    from mixture_ip_ros.data.dataset import load_dataset
-    from mixture_ip_ros.data.scenarios import LABEL_FILE, read_labels
+    from mixture_ip_ros.io.dataset import load_dataset
+    from mixture_ip_ros.scenarios.generated import LABEL_FILE, read_labels
     demos, skipped = load_dataset(bag_dir)
     for s in skipped:
         logger.warning('skipped %s: %s', s.path, s.reason)
@@ -229,7 +229,7 @@ def _feed_until(est, demo, rows, j, t_max):
 
 def evaluate_box_assembly(demos, out_dir: Path, config: EvalConfig = None) -> dict:
     """Thesis 3.4.2 plus online selection; see the module docstring. Returns the metrics dict."""
-    from mixture_ip_ros import plots
+    from mixture_ip_ros.viz import plots
     from mixture_ip_ros.robot.kinematics import IiwaKinematics
     config = config or box_config()
     out_dir = Path(out_dir)
@@ -334,8 +334,8 @@ def evaluate_box_assembly(demos, out_dir: Path, config: EvalConfig = None) -> di
 
 def evaluate_pole(demos, out_dir: Path, config: EvalConfig = None) -> dict:
     """Thesis 3.4.1: RMS vs K, and one Gaussian vs the mixture as flange paths around the pole."""
-    from mixture_ip_ros import plots
-    from mixture_ip_ros.data.scenarios import (LINK_RADIUS, POLE_BOTH_SIDES_Y, link_points,
+    from mixture_ip_ros.viz import plots
+    from mixture_ip_ros.scenarios.generated import (LINK_RADIUS, POLE_BOTH_SIDES_Y, link_points,
                                               pole_clearance)
     from mixture_ip_ros.robot.scene import POLE_HEIGHT, POLE_RADIUS, POLE_XY
     from mixture_ip_ros.robot.kinematics import IiwaKinematics
@@ -475,7 +475,7 @@ def _by_fraction(fractions, R):
 
 def evaluate_phase(data, out_dir: Path, config: EvalConfig = None) -> dict:
     """Thesis 4.3.1 (Figs. 16-27): train on 20 letters, complete 20 test letters online."""
-    from mixture_ip_ros import plots
+    from mixture_ip_ros.viz import plots
     config = config or letter_config()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -514,7 +514,7 @@ def evaluate_missing_data(data, out_dir: Path, config: EvalConfig = None) -> dic
     """Thesis 4.3.2 (Figs. 36-37, 42-43): EM vs regression from training letters with gaps."""
     from scipy import linalg
 
-    from mixture_ip_ros import plots
+    from mixture_ip_ros.viz import plots
     from mixture_ip_ros.core.promp import observation_stats, ridge_weights, weight_posterior
     config = config or letter_config()
     out_dir = Path(out_dir)

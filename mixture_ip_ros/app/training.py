@@ -8,12 +8,12 @@ import numpy as np
 
 from mixture_ip_ros.core.mixture import (MixtureIProMP, loo_rms_by_components,
                                          select_n_components)
-from mixture_ip_ros.data.model_file import save_model
+from mixture_ip_ros.io.model_file import save_model
+from mixture_ip_ros.robot.description import JOINT_NAMES
 
 logger = logging.getLogger(__name__)
 
 OBSERVED_NAMES = ('wrist_x', 'wrist_y', 'wrist_z')
-JOINT_NAMES = tuple(f'iiwa_joint_{i}' for i in range(1, 8))
 
 
 def choose_n_components(demos, candidates, progress=None, **params):

@@ -16,13 +16,13 @@ from pathlib import Path
 
 import numpy as np
 
-from mixture_ip_ros.data.bags import read_bag
-from mixture_ip_ros.data.dataset import load_demonstration
-from mixture_ip_ros.data.scenarios import read_labels, write_scenario_bags
+from mixture_ip_ros.io.bags import read_bag
+from mixture_ip_ros.io.dataset import load_demonstration
+from mixture_ip_ros.scenarios.generated import read_labels, write_scenario_bags
 from mixture_ip_ros.robot.kinematics import IiwaKinematics
-from mixture_ip_ros.training import text_progress, train_to_file
+from mixture_ip_ros.app.training import text_progress, train_to_file
 
-log = logging.getLogger('mixture_ip_ros.demo')
+log = logging.getLogger('mixture_ip_ros.app.demo')
 
 
 def split_held_out(labels: dict, per_pattern: int, seed: int = 0):
@@ -62,7 +62,7 @@ def prepare(data_dir: Path, out_dir: Path, held_out: int, seed: int, n_component
 
 def run_demo(args):
     os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
-    from mixture_ip_ros.system import ClosedLoop   # rclpy only once the data is ready
+    from mixture_ip_ros.app.closed_loop import ClosedLoop   # rclpy only once the data is ready
 
     data_dir, out_dir = Path(args.data), Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -133,7 +133,7 @@ def make_report(records, info, latency):
 
 def render_all(records, render_dir: Path):
     try:
-        from mixture_ip_ros.render import render_interaction, rendering_available
+        from mixture_ip_ros.viz.render import render_interaction, rendering_available
     except ImportError as e:
         print(f'rendering unavailable ({e}); no video', file=sys.stderr)
         return

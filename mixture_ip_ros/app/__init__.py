@@ -1,0 +1,1 @@
+"""Applications: the command line, training, evaluation, the closed loop and the demo."""

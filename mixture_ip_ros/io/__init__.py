@@ -1,0 +1,1 @@
+"""Files: rosbag2 bags, demonstration datasets, model files, interaction records."""

@@ -1,0 +1,1 @@
+"""Demonstration sets: generated scenarios that mirror the thesis's experiments."""

@@ -1,0 +1,1 @@
+"""Visualisation: evaluation plots and offscreen rendering of interactions."""
