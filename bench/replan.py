@@ -22,7 +22,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint  # noqa: E
 from mixture_ip_ros.core.mixture import MixtureIProMP  # noqa: E402
 from mixture_ip_ros.core.online import OnlineEstimator  # noqa: E402
 from mixture_ip_ros.nodes.cdr import JointTrajectoryEncoder  # noqa: E402
-from mixture_ip_ros.estimation.planning import build_plan  # noqa: E402
+from mixture_ip_ros.estimation.plans import build_plan  # noqa: E402
 from mixture_ip_ros.robot.description import JOINT_NAMES  # noqa: E402
 from mixture_ip_ros.scenarios.synthetic import mixture_demos  # noqa: E402
 

@@ -35,3 +35,14 @@ def ros_context():
         yield ctx
     finally:
         rclpy.try_shutdown(context=ctx)
+
+
+@pytest.fixture
+def harness(ros_context):
+    """The node-test harness (test/ros_harness.py) on a fresh context."""
+    from ros_harness import RosHarness
+    h = RosHarness(ros_context)
+    try:
+        yield h
+    finally:
+        h.close()

@@ -79,12 +79,15 @@ def test_bad_input_does_not_break_the_running_system(loop, setup):
     from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
     node = loop.recorder
     raw_pub = node.create_publisher(PoseStamped, '/mocap/wrist', qos_profile_sensor_data)
+    observer = loop.observer
 
-    class pose_pub:  # a mocap driver's pace: one message per ms at most (best effort, depth 5)
+    class pose_pub:  # best effort, depth 5: one at a time, as a mocap driver's pace allows
         @staticmethod
         def publish(msg):
+            handled = observer.accepted + sum(observer.drop_counts.values())
             raw_pub.publish(msg)
-            time.sleep(0.001)
+            loop.wait_until(lambda: observer.accepted + sum(observer.drop_counts.values())
+                            > handled, timeout=10, what='the observer to take the pose')
     traj_pub = node.create_publisher(JointTrajectory, '/iiwa/joint_trajectory',
                                      QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
     rejected_before = loop.sim.rejection_count
@@ -127,7 +130,7 @@ def test_bad_input_does_not_break_the_running_system(loop, setup):
         elif kind == 3:
             p.positions = [0.0] * 3
         elif kind == 4:
-            msg.points = []
+            msg.points = [p, JointTrajectoryPoint(positions=[0.0] * 7)]   # times not increasing
         elif kind == 5:
             p.velocities = [math.nan] * 7
         if kind != 4:
@@ -154,6 +157,34 @@ def test_bad_input_does_not_break_the_running_system(loop, setup):
     assert r.chosen_pattern == r.true_pattern
     assert np.linalg.norm(r.flange[-1] - r.target) < 0.03
     assert r.extra['non_finite_commands'] == 0
+
+
+def test_deactivating_the_estimator_mid_interaction_stops_the_robot(loop, setup):
+    """Through its lifecycle service, while the robot follows a plan: no plan reaches the
+    robot afterwards, the arm stops and holds, and the reactivated estimator works again."""
+    import threading
+    name = setup['held'][0]
+    loop.go_home()
+    done = []
+    replay = threading.Thread(target=lambda: done.append(loop.run_interaction(
+        setup['data'] / name)), daemon=True)
+    replay.start()
+    loop.wait_until(lambda: loop.estimator.state == 'committed', timeout=60,
+                    what='the robot committed')
+    loop.wait_sim(0.2)                                    # moving along its plan
+    assert loop.set_state('estimator_node', 'deactivate')
+    sim = loop.sim.sim
+    loop.wait_until(lambda: not sim.follower.active, timeout=10, what='the stop')
+    accepted, q_stop = sim.accepted_count, sim.q
+    replay.join(timeout=120)
+    assert done, 'the replay did not finish'
+    assert sim.accepted_count == accepted                # nothing accepted after the stop
+    assert np.abs(sim.q - q_stop).max() < 0.02 and np.abs(sim.qd).max() < 1e-3
+    assert loop.estimator.interactions[-1].end_reason == 'deactivated'
+    assert loop.set_state('estimator_node', 'activate')
+    r = _run(loop, setup, setup['held'][1])
+    assert r.chosen_pattern == r.true_pattern
+    assert np.linalg.norm(r.flange[-1] - r.target) < 0.03
 
 
 def test_cross_process_one_interaction(setup, tmp_path):

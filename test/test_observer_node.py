@@ -1,20 +1,21 @@
-"""Observer node: pose checks and frame change (pure), then the node over real DDS."""
+"""Observer node: pose checks, frame change and stamps (pure), then the node over real DDS."""
 
 import math
-import time
+from types import SimpleNamespace
 
+from geometry_msgs.msg import PointStamped, PoseStamped
 import numpy as np
 import pytest
+from rclpy.parameter import Parameter
 from scipy.spatial.transform import Rotation
+from std_msgs.msg import Header
 
 from mixture_ip_ros.core.frames import FrameTransform, quaternion_to_matrix
-from mixture_ip_ros.core.stamps import ns_to_parts as ns_to_stamp
-from mixture_ip_ros.estimation.pose_check import POSE_REJECT_REASONS as REJECT_REASONS, check_pose
-
-
-def stamp_to_ns(sec, nanosec):
-    return sec * 1_000_000_000 + nanosec
 from mixture_ip_ros.core.segmentation import segment_motion
+from mixture_ip_ros.core.stamps import ns_to_parts, seconds_to_ns, stamp_to_ns
+from mixture_ip_ros.estimation.pose_check import POSE_REJECT_REASONS, check_pose
+from mixture_ip_ros.nodes import qos
+from mixture_ip_ros.nodes.observer_node import ObserverNode
 
 T0_NS = 1_700_000_000_123_456_789  # an epoch stamp with nanoseconds, like real mocap
 XYZ = [0.5, -0.2, 0.1]
@@ -38,7 +39,7 @@ def test_check_pose_reasons():
     assert check_pose(**{**good, 'frame_id': 'map', 'expected_frame': ''}) is None
     assert check_pose(**{**good, 'stamp_ns': 5}) == 'duplicate_stamp'
     assert check_pose(**{**good, 'stamp_ns': 4}) == 'stamp_backwards'
-    assert set(REJECT_REASONS) >= {'non_finite', 'bad_quaternion', 'wrong_frame',
+    assert set(POSE_REJECT_REASONS) >= {'non_finite', 'bad_quaternion', 'wrong_frame',
                                    'duplicate_stamp', 'stamp_backwards', 'exception'}
 
 
@@ -67,12 +68,14 @@ def test_transform_parameters_are_validated():
 
 
 def test_stamp_conversions_round_trip():
-    assert ns_to_stamp(T0_NS) == (1_700_000_000, 123_456_789)
-    assert stamp_to_ns(*ns_to_stamp(T0_NS)) == T0_NS
-    assert ns_to_stamp(-1) == (-1, 999_999_999)
+    assert ns_to_parts(T0_NS) == (1_700_000_000, 123_456_789)
+    sec, nanosec = ns_to_parts(T0_NS)
+    assert stamp_to_ns(SimpleNamespace(sec=sec, nanosec=nanosec)) == T0_NS
+    assert ns_to_parts(-1) == (-1, 999_999_999)
+    assert seconds_to_ns(1.5e-9) == 2 and seconds_to_ns(-0.25) == -250_000_000
 
 
-# -- ROS helpers ---------------------------------------------------------------------------
+# -- the node -----------------------------------------------------------------------------
 
 def min_jerk_reach(rate, start=0.8, duration=1.0, tail=0.9, distance=0.4, noise=5e-4, seed=0):
     """Stamps (ns) and mocap-frame wrist positions of a reach; true onset/end in seconds."""
@@ -88,229 +91,172 @@ def min_jerk_reach(rate, start=0.8, duration=1.0, tail=0.9, distance=0.4, noise=
 
 
 def pose_msg(stamp_ns, pos, quat=(0.0, 0.0, 0.0, 1.0), frame='world'):
-    from geometry_msgs.msg import PoseStamped
     msg = PoseStamped()
     msg.header.frame_id = frame
-    msg.header.stamp.sec, msg.header.stamp.nanosec = ns_to_stamp(int(stamp_ns))
+    msg.header.stamp.sec, msg.header.stamp.nanosec = ns_to_parts(int(stamp_ns))
     msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v) for v in pos)
     (msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z,
      msg.pose.orientation.w) = (float(v) for v in quat)
     return msg
 
 
-def spin_until(executor, condition, timeout=5.0, what='condition'):
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f'timed out waiting for {what}')
-        executor.spin_once(timeout_sec=0.005)
+class Observer:
+    """The observer in the harness, with a mocap publisher and recorders of its outputs."""
 
-
-def stamp_ns_of(header):
-    return stamp_to_ns(header.stamp.sec, header.stamp.nanosec)
-
-
-class Harness:
-    """The observer plus a test node publishing mocap (and /clock) and recording outputs."""
-
-    def __init__(self, ctx, **params):
-        from geometry_msgs.msg import PointStamped, PoseStamped
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.node import Node
-        from rclpy.parameter import Parameter
-        from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
-        from rosgraph_msgs.msg import Clock
-        from std_msgs.msg import Header
-
-        from mixture_ip_ros.nodes.observer_node import ObserverNode
-
+    def __init__(self, harness, **params):
         overrides = [Parameter(k, value=v) for k, v in params.items()]
-        self.observer = ObserverNode(context=ctx, parameter_overrides=overrides)
-        self.peer = Node('observer_test_peer', context=ctx)
-        self.pose_pub = self.peer.create_publisher(PoseStamped, '/mocap/wrist',
-                                                   qos_profile_sensor_data)
-        self.clock_pub = self.peer.create_publisher(Clock, '/clock', 10)
-        reliable = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
-        self.points, self.events = [], []
-        self.peer.create_subscription(PointStamped, '/observer/wrist', self.points.append,
-                                      reliable)
-        self.peer.create_subscription(Header, '/observer/event', self.events.append, reliable)
-        self.executor = SingleThreadedExecutor(context=ctx)
-        self.executor.add_node(self.observer)
-        self.executor.add_node(self.peer)
-        spin_until(self.executor, lambda: (
-            self.pose_pub.get_subscription_count() >= 1
-            and self.observer._obs_pub.get_subscription_count() >= 1
-            and self.observer._event_pub.get_subscription_count() >= 1), what='discovery')
+        self.h = harness
+        self.node = harness.add(ObserverNode(context=harness.context,
+                                             parameter_overrides=overrides))
+        self.pose_pub = harness.publisher(PoseStamped, '/mocap/wrist', qos.sensor_data(100))
+        self.points = harness.subscribe(PointStamped, '/observer/wrist', qos.reliable(5000))
+        self.events = harness.subscribe(Header, '/observer/event', qos.reliable(5000))
+        harness.matched(self.pose_pub, self.node._obs_pub, self.node._event_pub)
 
     def handled(self):
-        return self.observer.accepted + sum(self.observer.drop_counts.values())
+        return self.node.accepted + sum(self.node.drop_counts.values())
 
     def send(self, msg):
-        """Publish one pose and wait until the observer has handled it (none lost)."""
+        """Publish one pose and spin until the observer has handled it (none lost)."""
         before = self.handled()
         self.pose_pub.publish(msg)
-        spin_until(self.executor, lambda: self.handled() > before, what='pose delivery')
-
-    def set_clock(self, ns):
-        from rosgraph_msgs.msg import Clock
-        msg = Clock()
-        msg.clock.sec, msg.clock.nanosec = ns_to_stamp(ns)
-        self.clock_pub.publish(msg)
-        spin_until(self.executor,
-                   lambda: self.observer.get_clock().now().nanoseconds >= ns, what='/clock')
-
-    def close(self):
-        self.executor.shutdown()
-        self.observer.destroy_node()
-        self.peer.destroy_node()
+        self.h.spin_until(lambda: self.handled() > before, what='pose delivery')
 
 
-# -- node: pure logic through direct callback calls -----------------------------------------
-
-def test_bad_poses_are_dropped_counted_and_node_keeps_working(ros_context):
-    from mixture_ip_ros.nodes.observer_node import ObserverNode
-    node = ObserverNode(context=ros_context)
-    try:
-        stamps, p, true_on, _ = min_jerk_reach(200)
-        node.on_pose(pose_msg(stamps[0], p[0]))
-        bad = [
-            pose_msg(stamps[1], (math.nan, 0, 0)),
-            pose_msg(stamps[1], p[1], quat=(0, 0, 0, 0)),       # unset orientation
-            pose_msg(stamps[1], p[1], quat=(0.1, 0, 0, 1.0)),   # norm 1.005: kept
-            pose_msg(stamps[2], p[2], frame='camera'),
-            pose_msg(stamps[1], p[1]),                           # same stamp as the last
-            pose_msg(stamps[0], p[0]),                           # backwards
-            None,                                                # not even a message
-        ]
-        for msg in bad:
-            node.on_pose(msg)
-        assert node.drop_counts == {'non_finite': 1, 'bad_quaternion': 1, 'wrong_frame': 1,
-                                    'duplicate_stamp': 1, 'stamp_backwards': 1, 'exception': 1}
-        assert node.accepted == 2
-        for s, x in zip(stamps[2:], p[2:]):
-            node.on_pose(pose_msg(s, x))
-        assert node.accepted == len(stamps)
-        assert node.published['onset'] == 1 and node.published['end'] == 1
-        assert node.published['observations'] > 100
-    finally:
-        node.destroy_node()
+def test_bad_poses_are_dropped_counted_and_the_node_keeps_working(harness):
+    node = harness.add(ObserverNode(context=harness.context))
+    stamps, p, true_on, _ = min_jerk_reach(200)
+    node.on_pose(pose_msg(stamps[0], p[0]))
+    bad = [
+        pose_msg(stamps[1], (math.nan, 0, 0)),
+        pose_msg(stamps[1], p[1], quat=(0, 0, 0, 0)),       # unset orientation
+        pose_msg(stamps[1], p[1], quat=(0.1, 0, 0, 1.0)),   # norm 1.005: kept
+        pose_msg(stamps[2], p[2], frame='camera'),
+        pose_msg(stamps[1], p[1]),                           # same stamp as the last
+        pose_msg(stamps[0], p[0]),                           # backwards
+        None,                                                # not even a message
+    ]
+    for msg in bad:
+        node.on_pose(msg)
+    assert node.drop_counts == {'non_finite': 1, 'bad_quaternion': 1, 'wrong_frame': 1,
+                                'duplicate_stamp': 1, 'stamp_backwards': 1, 'exception': 1}
+    assert node.accepted == 2
+    for s, x in zip(stamps[2:], p[2:]):
+        node.on_pose(pose_msg(s, x))
+    assert node.accepted == len(stamps)
+    assert node.published['onset'] == 1 and node.published['end'] == 1
+    assert node.published['observations'] > 100
 
 
-def test_stream_restart_after_consistent_backwards_stamps(ros_context):
-    from rclpy.parameter import Parameter
-
-    from mixture_ip_ros.nodes.observer_node import ObserverNode
-    node = ObserverNode(context=ros_context,
-                        parameter_overrides=[Parameter('restart_after_backwards', value=5)])
-    try:
-        for k in range(10):
-            node.on_pose(pose_msg(T0_NS + k * 10_000_000, (0, 0, 1)))
-        for k in range(4):  # replay from the start: the first few are dropped ...
-            node.on_pose(pose_msg(T0_NS - 10**9 + k * 10_000_000, (0, 0, 1)))
-        assert node.drop_counts['stamp_backwards'] == 4 and node.stream_restarts == 0
-        node.on_pose(pose_msg(T0_NS - 10**9 + 4 * 10_000_000, (0, 0, 1)))
-        assert node.stream_restarts == 1 and node.accepted == 11  # ... then it is a new stream
-        node.on_pose(pose_msg(T0_NS - 10**9 + 5 * 10_000_000, (0, 0, 1)))
-        assert node.accepted == 12
-    finally:
-        node.destroy_node()
+def test_stream_restart_after_consistent_backwards_stamps(harness):
+    node = harness.add(ObserverNode(context=harness.context, parameter_overrides=[
+        Parameter('restart_after_backwards', value=5)]))
+    for k in range(10):
+        node.on_pose(pose_msg(T0_NS + k * 10_000_000, (0, 0, 1)))
+    for k in range(4):  # replay from the start: the first few are dropped ...
+        node.on_pose(pose_msg(T0_NS - 10**9 + k * 10_000_000, (0, 0, 1)))
+    assert node.drop_counts['stamp_backwards'] == 4 and node.observer.counts.stream_restarts == 0
+    node.on_pose(pose_msg(T0_NS - 10**9 + 4 * 10_000_000, (0, 0, 1)))
+    assert node.observer.counts.stream_restarts == 1 and node.accepted == 11   # a new stream
+    node.on_pose(pose_msg(T0_NS - 10**9 + 5 * 10_000_000, (0, 0, 1)))
+    assert node.accepted == 12
 
 
-def test_params_file_matches_declared_defaults(ros_context):
-    import yaml
+def test_reach_end_to_end_over_dds(harness):
+    o = Observer(harness, mocap_to_base_xyz=XYZ, mocap_to_base_xyzw=XYZW)
+    rate = 200
+    stamps, p, true_on, true_end = min_jerk_reach(rate, seed=3)
+    for k, (s, x) in enumerate(zip(stamps, p)):
+        o.send(pose_msg(s, x))
+        if k == 50:  # at rest: one of each bad input, all dropped
+            o.send(pose_msg(s + 1000, (0, math.nan, 0)))
+            o.send(pose_msg(s + 1000, x, quat=(0, 0, 0.5, 0.5)))
+            o.send(pose_msg(s + 1000, x, frame='map'))
+            o.send(pose_msg(s, x))
+            o.send(pose_msg(s - 5_000_000, x))
+    harness.spin_until(lambda: [e.frame_id for e in o.events].count('end') == 1,
+                       what="the 'end' event")
+    harness.spin_until(lambda: len(o.points) == o.node.published['observations'],
+                       what='all observations')
+    assert o.node.drop_counts == {
+        'non_finite': 1, 'bad_quaternion': 1, 'wrong_frame': 1, 'duplicate_stamp': 1,
+        'stamp_backwards': 1, 'exception': 0}
+    assert o.node.accepted == len(stamps)
 
-    from mixture_ip_ros.nodes.observer_node import ObserverNode
-    from mixture_ip_ros.core.share import config_path
-    path = config_path('observer.yaml')
-    params = yaml.safe_load(path.read_text())['observer_node']['ros__parameters']
-    node = ObserverNode(context=ros_context,
-                        cli_args=['--ros-args', '--params-file', str(path)])
-    try:
-        declared = {n: p.value for n, p in node.get_parameters_by_prefix('').items()
-                    if n not in ('use_sim_time', 'start_type_description_service')}
-        assert set(params) == set(declared)  # every setting documented, none unknown
-        for name, value in params.items():
-            got = declared[name]
-            assert (list(got) if isinstance(value, list) else got) == value, name
-    finally:
-        node.destroy_node()
+    # A 'gap' could only come from a >0.1 s stall of this process, never from the data.
+    events = [e for e in o.events if e.frame_id != 'gap']
+    assert [e.frame_id for e in events] == ['onset', 'end']
+    onset_ns, end_ns = stamp_to_ns(events[0].stamp), stamp_to_ns(events[1].stamp)
+    assert abs((onset_ns - T0_NS) * 1e-9 - true_on) < 0.03
+    assert abs((end_ns - T0_NS) * 1e-9 - true_end) < 0.15
 
+    # Observations: every accepted pose as it came, in order, original stamps, in the
+    # base frame (checked against scipy's rotation).
+    got = np.array([stamp_to_ns(m.header.stamp) for m in o.points])
+    np.testing.assert_array_equal(got, stamps)
+    assert all(m.header.frame_id == 'iiwa_link_0' for m in o.points)
+    xyz = np.array([[m.point.x, m.point.y, m.point.z] for m in o.points])
+    expected = Rotation.from_quat(XYZW).apply(p) + XYZ
+    np.testing.assert_allclose(xyz, expected, atol=1e-12)
+    assert not o.node.moving
 
-# -- node over DDS --------------------------------------------------------------------------
-
-def test_reach_end_to_end_over_dds(ros_context):
-    h = Harness(ros_context, mocap_to_base_xyz=XYZ, mocap_to_base_xyzw=XYZW)
-    try:
-        rate = 200
-        stamps, p, true_on, true_end = min_jerk_reach(rate, seed=3)
-        for k, (s, x) in enumerate(zip(stamps, p)):
-            h.send(pose_msg(s, x))
-            if k == 50:  # at rest: one of each bad input, all dropped
-                h.send(pose_msg(s + 1000, (0, math.nan, 0)))
-                h.send(pose_msg(s + 1000, x, quat=(0, 0, 0.5, 0.5)))
-                h.send(pose_msg(s + 1000, x, frame='map'))
-                h.send(pose_msg(s, x))
-                h.send(pose_msg(s - 5_000_000, x))
-        spin_until(h.executor, lambda: [e.frame_id for e in h.events].count('end') == 1,
-                   what="the 'end' event")
-        spin_until(h.executor, lambda: len(h.points) == h.observer.published['observations'],
-                   what='all observations')
-        assert h.observer.drop_counts == {
-            'non_finite': 1, 'bad_quaternion': 1, 'wrong_frame': 1, 'duplicate_stamp': 1,
-            'stamp_backwards': 1, 'exception': 0}
-        assert h.observer.accepted == len(stamps)
-
-        # A 'gap' could only come from a >0.1 s stall of this process, never from the data.
-        events = [e for e in h.events if e.frame_id != 'gap']
-        assert [e.frame_id for e in events] == ['onset', 'end']
-        onset_ns, end_ns = stamp_ns_of(events[0]), stamp_ns_of(events[1])
-        assert abs((onset_ns - T0_NS) * 1e-9 - true_on) < 0.03
-        assert abs((end_ns - T0_NS) * 1e-9 - true_end) < 0.15
-
-        # Observations: every accepted pose as it came, in order, original stamps, in the
-        # base frame (checked against scipy's rotation).
-        got = np.array([stamp_ns_of(m.header) for m in h.points])
-        np.testing.assert_array_equal(got, stamps)
-        assert all(m.header.frame_id == 'iiwa_link_0' for m in h.points)
-        xyz = np.array([[m.point.x, m.point.y, m.point.z] for m in h.points])
-        expected = Rotation.from_quat(XYZW).apply(p) + XYZ
-        np.testing.assert_allclose(xyz, expected, atol=1e-12)
-        assert not h.observer.moving
-
-        # Online and offline segmentation agree to the nanosecond on the same samples.
-        t_rel = (stamps - stamps[0]) * 1e-9
-        base = FrameTransform(XYZ, XYZW).apply_array(p)
-        on, end = segment_motion(t_rel, base)
-        assert abs(stamps[0] + round(on * 1e9) - onset_ns) <= 1
-        assert abs(stamps[0] + round(end * 1e9) - end_ns) <= 1
-    finally:
-        h.close()
+    # Online and offline segmentation agree to the nanosecond on the same samples.
+    t_rel = (stamps - stamps[0]) * 1e-9
+    base = FrameTransform(XYZ, XYZW).apply_array(p)
+    on, end = segment_motion(t_rel, base)
+    assert abs(stamps[0] + round(on * 1e9) - onset_ns) <= 1
+    assert abs(stamps[0] + round(end * 1e9) - end_ns) <= 1
 
 
-def test_pause_in_stream_gives_one_gap_event_in_sim_time(ros_context):
-    h = Harness(ros_context, use_sim_time=True, gap_timeout=0.1)
-    try:
-        period = 10_000_000  # 100 Hz
-        h.set_clock(T0_NS)
-        k = 0
-        for k in range(60):  # 0.6 s at rest
-            h.set_clock(T0_NS + k * period)
-            h.send(pose_msg(T0_NS + k * period, (0.2, 0.1, 1.0)))
-        last_ns = T0_NS + k * period
-        for j in range(1, 51):  # 0.5 s of sim time with no mocap
-            h.set_clock(last_ns + j * period)
-        spin_until(h.executor, lambda: len(h.events) >= 1, what="the 'gap' event")
-        assert [e.frame_id for e in h.events] == ['gap']
-        assert stamp_ns_of(h.events[0]) == last_ns  # the gap starts after the last sample
-        for j in range(51, 80):  # the stream resumes: the gap is not reported again
-            h.set_clock(last_ns + j * period)
-            h.send(pose_msg(last_ns + j * period, (0.2, 0.1, 1.0)))
-        for _ in range(20):
-            h.executor.spin_once(timeout_sec=0.001)
-        assert [e.frame_id for e in h.events] == ['gap']
-        assert h.observer.published['gap'] == 1
-        spin_until(h.executor, lambda: len(h.points) == 89, what="every pose forwarded")
-        assert not h.observer.moving  # nothing moved: no onset
-    finally:
-        h.close()
+def test_pause_in_stream_gives_a_gap_event_on_simulated_time(harness):
+    """On simulated time the gap is found when the simulated clock passes gap_timeout after
+    the last sample, however long the wall clock took."""
+    o = Observer(harness, use_sim_time=True, gap_timeout=0.1)
+    period = 10_000_000  # 100 Hz
+    k = 0
+    for k in range(60):  # 0.6 s at rest
+        harness.set_clock(T0_NS + k * period)
+        o.send(pose_msg(T0_NS + k * period, (0.2, 0.1, 1.0)))
+    last_ns = T0_NS + k * period
+    j = 1
+    while not o.events:  # the clock runs on, no mocap
+        harness.set_clock(last_ns + j * period)
+        j += 1
+        assert j < 100, 'no gap event'
+    assert [e.frame_id for e in o.events] == ['gap']
+    assert stamp_to_ns(o.events[0].stamp) == last_ns  # the gap starts after the last sample
+    # found within one timer period (gap_timeout / 4) of simulated time after the timeout
+    assert 0.1 < (j - 1) * period * 1e-9 <= 0.1 + 0.025 + 0.03   # (+ delivery steps)
+
+
+def test_inactive_observer_does_not_subscribe(harness):
+    node = harness.add(ObserverNode(context=harness.context), start=False)
+    assert node.lifecycle_state == 'unconfigured'
+    node.trigger_configure()
+    assert harness.probe.count_subscribers('/mocap/wrist') == 0
+    node.trigger_activate()
+    harness.spin_until(lambda: harness.probe.count_subscribers('/mocap/wrist') == 1,
+                       what='the subscription')
+    node.trigger_deactivate()
+    harness.spin_until(lambda: harness.probe.count_subscribers('/mocap/wrist') == 0,
+                       what='the subscription gone')
+    assert node.lifecycle_state == 'inactive'
+
+
+@pytest.mark.parametrize('params, match', [
+    ({'mocap_to_base_xyzw': [0.0, 0.0, 0.0, 2.0]}, 'mocap_to_base_xyzw'),
+    ({'mocap_to_base_xyz': [0.0, float('nan'), 0.0]}, 'mocap_to_base_xyz'),
+    ({'quaternion_tolerance': float('nan')}, 'quaternion_tolerance'),
+    ({'onset_speed': -1.0}, 'onset_speed'),
+])
+def test_invalid_parameters_are_refused_naming_the_parameter(ros_context, params, match):
+    with pytest.raises(ValueError, match=match):
+        ObserverNode(context=ros_context,
+                     parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
+
+
+def test_inconsistent_segmentation_is_refused_at_configure(harness):
+    node = harness.add(ObserverNode(context=harness.context, parameter_overrides=[
+        Parameter('end_speed', value=0.5)]), start=False)
+    assert node.trigger_configure().to_label() == 'transition_failure'
+    assert 'end_speed' in node.refusal and 'onset_speed' in node.refusal

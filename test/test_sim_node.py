@@ -1,19 +1,15 @@
-"""sim_node over real DDS: in-process convergence, rejections, params file, the executable."""
+"""sim_node over real DDS: in-process convergence, rejections, stopping and holding, its
+lifecycle, and the executable."""
 
 import os
 import signal
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
-import rclpy
-import yaml
 from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import PoseStamped
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
@@ -47,46 +43,28 @@ def _trajectory(goal, duration, names=JOINT_NAMES, stamp=None):
     return msg
 
 
-class Harness:
-    """The node under test plus a client node, spun by one executor on the test's context."""
+class Sim:
+    """The sim node in the harness, with a trajectory publisher and recorders of its outputs."""
 
-    def __init__(self, ctx, **overrides):
-        params = [Parameter('real_time_factor', value=0.0)]
-        params += [Parameter(k, value=v) for k, v in overrides.items()]
-        self.sim_node = SimNode(context=ctx, parameter_overrides=params)
-        self.client = rclpy.create_node('sim_node_test_client', context=ctx)
-        self.joint_states, self.poses, self.clocks = [], [], []
-        self.client.create_subscription(JointState, 'joint_states', self.joint_states.append,
-                                        RELIABLE)
-        self.client.create_subscription(PoseStamped, 'iiwa/flange_pose', self.poses.append,
-                                        RELIABLE)
-        self.client.create_subscription(Clock, '/clock', self.clocks.append, RELIABLE)
-        self.pub = self.client.create_publisher(JointTrajectory, 'iiwa/joint_trajectory',
-                                                RELIABLE)
-        self.executor = SingleThreadedExecutor(context=ctx)
-        self.executor.add_node(self.sim_node)
-        self.executor.add_node(self.client)
-
-    def spin_until(self, condition, timeout=20.0):
-        end = time.monotonic() + timeout
-        while not condition():
-            assert time.monotonic() < end, 'timed out'
-            self.executor.spin_once(timeout_sec=0.01)
-
-    def close(self):
-        self.executor.shutdown()
-        self.sim_node.destroy_node()
-        self.client.destroy_node()
+    def __init__(self, harness, start=True, **overrides):
+        params = {'real_time_factor': 0.0, **overrides}
+        self.h = harness
+        self.sim_node = harness.add(SimNode(context=harness.context, parameter_overrides=[
+            Parameter(k, value=v) for k, v in params.items()]), start=start)
+        self.joint_states = harness.subscribe(JointState, 'joint_states', RELIABLE)
+        self.poses = harness.subscribe(PoseStamped, 'iiwa/flange_pose', RELIABLE)
+        self.clocks = harness.subscribe(Clock, '/clock', RELIABLE)
+        self.pub = harness.publisher(JointTrajectory, 'iiwa/joint_trajectory', RELIABLE)
+        self.spin_until = harness.spin_until
 
 
 @pytest.fixture
-def harness(ros_context):
-    h = Harness(ros_context)
-    yield h
-    h.close()
+def sim(harness):
+    return Sim(harness)
 
 
-def test_joint_states_converge_to_the_trajectory_end(harness):
+def test_joint_states_converge_to_the_trajectory_end(sim):
+    harness = sim
     sim = harness.sim_node.sim
     harness.spin_until(lambda: harness.pub.get_subscription_count() > 0 and harness.joint_states)
     goal = HOME + np.array([0.3, -0.2, 0.25, 0.3, -0.3, 0.2, 0.5])
@@ -113,7 +91,8 @@ def test_joint_states_converge_to_the_trajectory_end(harness):
     assert harness.sim_node.rejection_count == 0
 
 
-def test_bad_trajectories_are_rejected_and_counted(harness):
+def test_bad_trajectories_are_rejected_and_counted(sim):
+    harness = sim
     sim = harness.sim_node.sim
     harness.spin_until(lambda: harness.pub.get_subscription_count() > 0 and harness.joint_states)
     harness.spin_until(lambda: sim.time > 1.0)
@@ -129,103 +108,104 @@ def test_bad_trajectories_are_rejected_and_counted(harness):
     assert sim.accepted_count == 0
 
 
-def test_params_file_is_the_node_parameters():
-    path = config_path('sim.yaml')
-    values = yaml.safe_load(path.read_text())['sim_node']['ros__parameters']
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=private_domain_id(),
-               args=['--ros-args', '--params-file', str(path)])
-    try:
-        node = SimNode(context=ctx)
-        builtin = {'use_sim_time', 'start_type_description_service'}
-        declared = set(node._parameters) - builtin
-        assert declared == set(values)
-        for name, value in values.items():
-            assert node.get_parameter(name).value == pytest.approx(value)
-        np.testing.assert_allclose(node.sim.q, values['initial_positions'])
-        assert node.steps_per_publish == round(1000 / values['publish_rate'])
-        node.destroy_node()
-    finally:
-        rclpy.try_shutdown(context=ctx)
-
-
-def test_runs_as_an_executable_with_ros_args(ros_context):
+def _executable(*params, **popen):
     env = dict(os.environ, ROS_DOMAIN_ID=str(private_domain_id()))
-    proc = subprocess.Popen(
-        [sys.executable, '-m', 'mixture_ip_ros.nodes.sim_node', '--ros-args',
-         '--params-file', str(config_path('sim.yaml')), '-p', 'real_time_factor:=1.0',
-         '-p', 'publish_rate:=50.0'],
-        env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
-    client = rclpy.create_node('sim_node_exec_client', context=ros_context)
-    got = []
-    client.create_subscription(JointState, 'joint_states', got.append, RELIABLE)
-    executor = SingleThreadedExecutor(context=ros_context)
-    executor.add_node(client)
+    args = [sys.executable, '-m', 'mixture_ip_ros.nodes.sim_node', '--ros-args',
+            '--params-file', str(config_path('sim.yaml'))]
+    for p in params:
+        args += ['-p', p]
+    return subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            **popen)
+
+
+def _interrupt(proc):
+    proc.send_signal(signal.SIGINT)
     try:
-        end = time.monotonic() + 20
-        while len(got) < 5 and time.monotonic() < end and proc.poll() is None:
-            executor.spin_once(timeout_sec=0.05)
-        assert len(got) >= 5, proc.stdout.read().decode() if proc.poll() is not None else ''
+        out = proc.communicate(timeout=10)[0]
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out = proc.communicate()[0]
+    return proc.returncode, out.decode(errors='replace')
+
+
+def test_runs_as_an_executable_with_ros_args(harness):
+    proc = _executable('real_time_factor:=1.0', 'publish_rate:=50.0')
+    got = harness.subscribe(JointState, 'joint_states', RELIABLE)
+    try:
+        harness.spin_until(lambda: len(got) >= 5 or proc.poll() is not None,
+                           what='joint states from the executable')
+        assert len(got) >= 5, proc.stdout.read().decode()
         np.testing.assert_allclose(got[-1].position, HOME, atol=1e-5)
         stamps = [m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in got]
         np.testing.assert_allclose(np.diff(stamps), 0.02, atol=1e-9)   # publish_rate 50 Hz
     finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            code = proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            code = proc.wait()
-        executor.shutdown()
-        client.destroy_node()
-    assert code == 0
+        code, out = _interrupt(proc)
+    assert code == 0, out
 
 
-
-def test_ctrl_c_while_simulating_flat_out_exits_cleanly():
+def test_ctrl_c_while_simulating_flat_out_exits_cleanly(harness):
     """At real_time_factor 0 the node is nearly always inside a callback when SIGINT shuts the
     context down. Started as a shell's background job (SIGINT ignored until rclpy installs its
-    handler, so no KeyboardInterrupt), that ended in an RCLError traceback and exit code 1."""
-    env = dict(os.environ, ROS_DOMAIN_ID=str(private_domain_id()))
+    handler, so no KeyboardInterrupt), that must still end in exit code 0, no traceback."""
+    got = harness.subscribe(JointState, 'joint_states', RELIABLE)
     for _ in range(3):
-        proc = subprocess.Popen(
-            [sys.executable, '-m', 'mixture_ip_ros.nodes.sim_node', '--ros-args',
-             '--params-file', str(config_path('sim.yaml')), '-p', 'real_time_factor:=0.0'],
-            env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
-        out = b''
+        del got[:]
+        proc = _executable('real_time_factor:=0.0',
+                           preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
         try:
-            deadline = time.monotonic() + 20
-            while b'iiwa sim' not in out and time.monotonic() < deadline:   # started up
-                out += proc.stdout.readline()
-            time.sleep(1.0)
-            proc.send_signal(signal.SIGINT)
-            out += proc.communicate(timeout=10)[0]
+            harness.spin_until(lambda: len(got) >= 50 or proc.poll() is not None,
+                               what='the executable simulating')
         finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
-        text = out.decode(errors='replace')
-        assert proc.returncode == 0 and 'Traceback' not in text, text
+            code, text = _interrupt(proc)
+        assert code == 0 and 'Traceback' not in text, text
 
-def test_wall_clock_mode_stamps_ros_time_and_maps_trajectory_stamps(ros_context):
-    h = Harness(ros_context, simulated_time=False)
-    try:
-        sim = h.sim_node.sim
-        h.spin_until(lambda: h.pub.get_subscription_count() > 0 and h.joint_states)
-        assert h.clocks == []   # no /clock in wall-clock mode
-        now = h.client.get_clock().now()
-        stamp = h.joint_states[-1].header.stamp
-        assert abs(stamp.sec + 1e-9 * stamp.nanosec - now.nanoseconds * 1e-9) < 1.0
-        goal = HOME + 0.2
-        # Stamped with ROS time: starts now on the simulation's own clock.
-        h.pub.publish(_trajectory(goal, 0.5, stamp=now.to_msg()))
-        h.spin_until(lambda: sim.accepted_count == 1)
-        h.spin_until(lambda: np.allclose(h.joint_states[-1].position, goal, atol=1e-4))
-        # Stamped 10 s ago with a 0.5 s trajectory: over before it arrived.
-        old = Time(sec=now.to_msg().sec - 10, nanosec=now.to_msg().nanosec)
-        h.pub.publish(_trajectory(HOME, 0.5, stamp=old))
-        h.spin_until(lambda: h.sim_node.rejection_count == 1)
-        assert 'ends in the past' in h.sim_node.last_rejection
-    finally:
-        h.close()
+
+def test_an_empty_trajectory_stops_the_motion_and_holds(sim):
+    s = sim.sim_node.sim
+    sim.h.matched(sim.pub)
+    goal = HOME + 0.4
+    sim.pub.publish(_trajectory(goal, 2.0))
+    sim.spin_until(lambda: s.accepted_count == 1 and s.time > 0.7)
+    sim.pub.publish(JointTrajectory(joint_names=list(JOINT_NAMES)))
+    sim.spin_until(lambda: not s.follower.active)
+    stopped_at, q_stop = s.time, s.q
+    assert np.abs(q_stop - HOME).max() > 0.1 and np.abs(q_stop - goal).max() > 0.1  # mid-way
+    sim.spin_until(lambda: s.time > stopped_at + 1.0)
+    assert np.abs(s.q - q_stop).max() < 0.02 and np.abs(s.qd).max() < 1e-3
+    assert sim.sim_node.rejection_count == 0
+
+
+def test_deactivating_drops_the_trajectory_and_holds_while_time_goes_on(sim):
+    s = sim.sim_node.sim
+    sim.h.matched(sim.pub)
+    sim.pub.publish(_trajectory(HOME + 0.4, 2.0))
+    sim.spin_until(lambda: s.accepted_count == 1 and s.time > 0.7)
+    sim.sim_node.trigger_deactivate()
+    stopped_at, q_stop = s.time, s.q
+    sim.spin_until(lambda: s.time > stopped_at + 1.0 and len(sim.clocks) > 0)
+    assert np.abs(s.q - q_stop).max() < 0.02 and np.abs(s.qd).max() < 1e-3
+    assert sim.h.probe.count_subscribers('iiwa/joint_trajectory') == 0
+    sim.sim_node.trigger_activate()
+    sim.spin_until(lambda: sim.pub.get_subscription_count() == 1, what='resubscribed')
+    sim.pub.publish(_trajectory(HOME, 1.0))
+    sim.spin_until(lambda: s.accepted_count == 2)
+
+
+def test_wall_clock_mode_stamps_ros_time_and_maps_trajectory_stamps(harness):
+    h = Sim(harness, simulated_time=False)
+    sim = h.sim_node.sim
+    h.spin_until(lambda: h.pub.get_subscription_count() > 0 and h.joint_states)
+    assert h.clocks == []   # no /clock in wall-clock mode
+    now = h.h.probe.get_clock().now()
+    stamp = h.joint_states[-1].header.stamp
+    assert abs(stamp.sec + 1e-9 * stamp.nanosec - now.nanoseconds * 1e-9) < 1.0
+    goal = HOME + 0.2
+    # Stamped with ROS time: starts now on the simulation's own clock.
+    h.pub.publish(_trajectory(goal, 0.5, stamp=now.to_msg()))
+    h.spin_until(lambda: sim.accepted_count == 1)
+    h.spin_until(lambda: np.allclose(h.joint_states[-1].position, goal, atol=1e-4))
+    # Stamped 10 s ago with a 0.5 s trajectory: over before it arrived.
+    old = Time(sec=now.to_msg().sec - 10, nanosec=now.to_msg().nanosec)
+    h.pub.publish(_trajectory(HOME, 0.5, stamp=old))
+    h.spin_until(lambda: h.sim_node.rejection_count == 1)
+    assert 'ends in the past' in h.sim_node.last_rejection

@@ -42,6 +42,37 @@ def _demo(args):
     run_demo(args)
 
 
+NODE_SCHEMAS = {'estimator_node': 'mixture_ip_ros.nodes.estimator_node:EstimatorParameters',
+                'observer_node': 'mixture_ip_ros.nodes.observer_node:ObserverParameters',
+                'sim_node': 'mixture_ip_ros.nodes.sim_node:SimParameters',
+                'bag_player': 'mixture_ip_ros.nodes.bag_player:BagPlayerParameters'}
+
+
+def _params(args):
+    import importlib
+    from mixture_ip_ros.nodes.params import markdown_table
+    module, name = NODE_SCHEMAS[args.node].split(':')
+    print(markdown_table(getattr(importlib.import_module(module), name)))
+
+
+def _lifecycle(args):
+    import rclpy
+    from mixture_ip_ros.nodes.lifecycle_client import LifecycleClient
+    rclpy.init()
+    node = rclpy.create_node('mixture_ip_lifecycle')
+    try:
+        client = LifecycleClient(node, args.node)
+        if args.transition != 'get':
+            if not client.change(args.transition, timeout=args.timeout):
+                raise ValueError(f'{args.node} refused to {args.transition} (its log says why)')
+        print(f'{args.node}: {client.state(timeout=args.timeout)}')
+    except TimeoutError as exc:
+        raise ValueError(str(exc)) from None
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
 def build_parser():
     p = argparse.ArgumentParser(prog='mixture-ip', description=__doc__)
     sub = p.add_subparsers(dest='command', required=True)
@@ -86,6 +117,19 @@ def build_parser():
     d.add_argument('--held-out', type=int, default=3, help='interactions replayed per pattern')
     d.add_argument('--seed', type=int, default=0)
     d.set_defaults(func=_demo)
+
+    m = sub.add_parser('params', help="a node's parameters as the README's Markdown table")
+    m.add_argument('node', choices=sorted(NODE_SCHEMAS))
+    m.set_defaults(func=_params)
+
+    lc = sub.add_parser('lifecycle', help='drive a managed node through its lifecycle services '
+                                          '(like `ros2 lifecycle set`), or get its state')
+    lc.add_argument('node', help='node name, e.g. estimator_node')
+    lc.add_argument('transition', choices=['configure', 'activate', 'deactivate', 'cleanup',
+                                           'shutdown', 'get'])
+    lc.add_argument('--timeout', type=float, default=10.0,
+                    help='s to wait for the service (discovery takes a few seconds)')
+    lc.set_defaults(func=_lifecycle)
     return p
 
 

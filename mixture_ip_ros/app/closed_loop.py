@@ -1,12 +1,14 @@
 """The closed loop in one process: bag_player -> observer -> estimator -> sim, on simulated time.
 
-The four real nodes talk over DDS on a private domain; an InteractionRecorder listens. The sim
-node owns the clock (/clock, paced at ``real_time_factor``), every other node runs with
-use_sim_time, and the player publishes each bag message when the simulated clock reaches its
-recorded time (stamps rewritten to that time). Used by ``mixture-ip demo`` and the integration
-tests.
+The four real nodes talk over DDS on a private domain; an InteractionRecorder listens. The managed
+nodes start unconfigured and are brought up through their lifecycle services (sim, then
+observer, then estimator), as an operator would. The sim node owns the clock (/clock, paced at
+``real_time_factor``), every other node runs with use_sim_time, and the player publishes each
+bag message when the simulated clock reaches its recorded time (stamps rewritten to that time).
+Used by ``mixture-ip demo`` and the integration tests.
 """
 
+from dataclasses import asdict
 import time
 from pathlib import Path
 
@@ -18,6 +20,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from mixture_ip_ros.nodes.bag_player import BagPlayer
 from mixture_ip_ros.nodes.estimator_node import EstimatorNode
+from mixture_ip_ros.nodes.lifecycle_client import LifecycleClient
 from mixture_ip_ros.nodes.observer_node import ObserverNode
 from mixture_ip_ros.nodes.recorder import InteractionRecorder
 from mixture_ip_ros.nodes.sim_node import SimNode
@@ -38,36 +41,56 @@ class ClosedLoop:
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain_id)
         sim_time = [Parameter('use_sim_time', value=True)]
-        self.sim = SimNode(context=self.context, parameter_overrides=_params(
+        managed = [Parameter('autostart', value=False)]
+        self.sim = SimNode(context=self.context, parameter_overrides=managed + _params(
             {'simulated_time': True, 'real_time_factor': float(real_time_factor),
              **(sim_params or {})}))
-        self.observer = ObserverNode(context=self.context, parameter_overrides=sim_time + _params(
-            observer_params or {}))
-        self.estimator = EstimatorNode(context=self.context, parameter_overrides=sim_time + _params(
-            {'model_path': str(model_path), **(estimator_params or {})}))
+        self.observer = ObserverNode(context=self.context, parameter_overrides=(
+            managed + sim_time + _params(observer_params or {})))
+        self.estimator = EstimatorNode(context=self.context, parameter_overrides=(
+            managed + sim_time + _params({'model_path': str(model_path),
+                                          **(estimator_params or {})})))
         self.recorder = InteractionRecorder(context=self.context, parameter_overrides=sim_time)
+        self._spinning = {node: spin_in_thread(node)
+                          for node in (self.sim, self.observer, self.estimator, self.recorder)}
+        self._operator = rclpy.create_node('closed_loop_operator', context=self.context)
+        self.lifecycle = {node.get_name(): LifecycleClient(self._operator, node.get_name())
+                          for node in (self.sim, self.observer, self.estimator)}
+        for name in ('sim_node', 'observer_node', 'estimator_node'):
+            for transition in ('configure', 'activate'):
+                if not self.lifecycle[name].change(transition, timeout=60.0):
+                    self.close()
+                    refusal = {'sim_node': self.sim, 'observer_node': self.observer,
+                               'estimator_node': self.estimator}[name].refusal
+                    raise ValueError(f'{name} failed to {transition}: {refusal}')
         self.home = np.asarray(home if home is not None else self.sim.sim.q, dtype=float)
         self._home_pub = self.recorder.create_publisher(JointTrajectory, '/iiwa/joint_trajectory',
                                                         10)
         self.kinematics = IiwaKinematics()
-        self.wrist_topic = self.observer.get_parameter('wrist_topic').value
-        self._spinning = {node: spin_in_thread(node)
-                          for node in (self.sim, self.observer, self.estimator, self.recorder)}
+        self.wrist_topic = self.observer.params.wrist_topic
         self.labels = (self.estimator.metadata.get('component_labels')
                        or [f'component_{k}' for k in range(self.estimator.model.n_components)])
+
+    def set_state(self, node_name: str, transition: str) -> bool:
+        """Trigger a lifecycle transition of one of the nodes through its service."""
+        return self.lifecycle[node_name].change(transition)
 
     # ------------------------------------------------------------------ time
     def now(self) -> float:
         return self.sim.sim.time
 
+    def wait_until(self, predicate, timeout: float = 120.0, what: str = 'the condition'):
+        """Block until ``predicate()`` holds (the nodes run in their own threads)."""
+        deadline = time.monotonic() + timeout
+        while not predicate():
+            if time.monotonic() > deadline:
+                raise TimeoutError(f'timed out waiting for {what}')
+            time.sleep(0.001)
+
     def wait_sim(self, seconds: float, timeout: float = 120.0):
         """Block until the simulated clock advanced by ``seconds``."""
         end = self.now() + seconds
-        deadline = time.monotonic() + timeout
-        while self.now() < end:
-            if time.monotonic() > deadline:
-                raise TimeoutError('the simulation stopped advancing')
-            time.sleep(0.005)
+        self.wait_until(lambda: self.now() >= end, timeout, 'the simulation to advance')
 
     def go_home(self, duration: float = 2.0):
         """Send the robot back to its start posture and wait until it is there."""
@@ -105,14 +128,13 @@ class ClosedLoop:
         snap = self.recorder.snapshot()
         joints = [(t, q) for t, q in snap['joints'] if t >= start]
         q = np.array([q for _, q in joints]).reshape(-1, 7)
-        inter = self.estimator.interactions[-1] if self.estimator.interactions else {}
+        inter = self.estimator.interactions[-1] if self.estimator.interactions else None
         K = len(self.labels)
         post = np.array([d for _, d in snap['posterior']]) if snap['posterior'] else np.zeros(
             (0, K + 4))
         events = dict((kind, t) for t, kind in reversed(snap['events']))
-        k = inter.get('final_component')
-        k = inter.get('component') if k is None else k
-        commit_phase = inter.get('commit_phase')
+        k = None if inter is None else (inter.final_component if inter.final_component is not None
+                                        else inter.component)
         return InteractionRecord(
             name=name, true_pattern=true_pattern, component_labels=list(self.labels),
             t=np.array([t for t, _ in joints]), q=q,
@@ -122,14 +144,19 @@ class ClosedLoop:
             posterior_t=np.array([t for t, _ in snap['posterior']]),
             posterior=post[:, :K], alpha=post[:, K], phase=post[:, K + 1],
             onset_time=events.get('onset'), end_time=events.get('end'),
-            commit_time=inter.get('commit_time'),
+            commit_time=None if inter is None else inter.commit_time,
             chosen_pattern=self.labels[k] if k is not None else None,
-            commit_fraction=commit_phase, target=None if target is None else np.asarray(target),
-            extra={'interaction': inter, 'non_finite_commands': self.recorder.non_finite_commands,
+            commit_fraction=None if inter is None else inter.commit_phase,
+            target=None if target is None else np.asarray(target),
+            extra={'interaction': None if inter is None else asdict(inter),
+                   'non_finite_commands': self.recorder.non_finite_commands,
                    'sim_rejections': self.sim.rejection_count,
                    'last_rejection': self.sim.last_rejection})
 
     def close(self):
+        for client in self.lifecycle.values():
+            client.destroy()
+        self._operator.destroy_node()
         nodes = (self.sim, self.observer, self.estimator, self.recorder)
         for node in nodes:
             self._stop(node)
@@ -138,6 +165,8 @@ class ClosedLoop:
         rclpy.try_shutdown(context=self.context)
 
     def _stop(self, node):
+        if node not in self._spinning:
+            return
         executor, thread = self._spinning.pop(node)
         executor.shutdown()
         thread.join(timeout=5)

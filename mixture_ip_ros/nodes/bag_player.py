@@ -18,21 +18,21 @@ simulator running slower or faster than real time, and stops while the simulatio
 """
 
 from collections import deque
+from dataclasses import dataclass
 import importlib
 import threading
 import time
 
-import rclpy
-import rclpy.logging
+from builtin_interfaces.msg import Time
 from rclpy.node import Node
-from rclpy.parameter import Parameter
-from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
-from builtin_interfaces.msg import Time
 
+from mixture_ip_ros.core.stamps import ns_to_parts
 from mixture_ip_ros.io.bags import BagError, read_messages
-from mixture_ip_ros.nodes.spinning import spin_until_shutdown
+from mixture_ip_ros.nodes import qos
+from mixture_ip_ros.nodes.managed import run_node
+from mixture_ip_ros.nodes.params import declare, param, positive
 
 
 def message_class(msgtype: str):
@@ -63,44 +63,51 @@ SIM_POLL = 0.002  # s between looks at a simulated clock
 
 
 def _to_time(ns: int) -> Time:
-    return Time(sec=ns // 10**9, nanosec=ns % 10**9)
+    sec, nanosec = ns_to_parts(ns)
+    return Time(sec=sec, nanosec=nanosec)
+
+
+@dataclass
+class BagPlayerParameters:
+    bag: str = param('', 'rosbag2 directory to play (required)')
+    rate: float = param(1.0, 'playback speed factor (2.0 = twice as fast)', low=0.0,
+                        high=1000.0, check=positive, rule='> 0')
+    loop: bool = param(False, 'start over when the bag ends')
+    remap: list = param([], "bag topic := published topic, e.g. ['/mocap/wrist:=/replay']")
+    topics: list = param([], 'play only these topics (default: all)')
+    sensor_data_topics: list = param(['/mocap/wrist'], 'published with sensor-data QoS '
+                                                       '(best effort)')
+    publish_clock: bool = param(False, "publish rosgraph_msgs/Clock on /clock with each "
+                                       "message's bag time")
+    rewrite_stamps: bool = param(False, 'set header.stamp to the time the message is '
+                                        'scheduled for')
+    start_paused: bool = param(False, 'wait for resume() before the first message')
+    start_delay: float = param(0.0, 's to wait before the first message (lets subscribers '
+                                    'match)', low=0.0, high=3600.0)
+    queue_depth: int = param(10, 'history depth of the reliable publishers', low=1,
+                             high=1_000_000)
 
 
 class BagPlayer(Node):
     """Publishes a bag's messages with their original timing; see the module docstring."""
 
-    def __init__(self, **kwargs):
-        super().__init__('bag_player', **kwargs)
-        self.declare_parameter('bag', '')
-        self.declare_parameter('rate', 1.0)
-        self.declare_parameter('loop', False)
-        self.declare_parameter('remap', Parameter.Type.STRING_ARRAY)
-        self.declare_parameter('topics', Parameter.Type.STRING_ARRAY)
-        self.declare_parameter('sensor_data_topics', ['/mocap/wrist'])
-        self.declare_parameter('publish_clock', False)
-        self.declare_parameter('rewrite_stamps', False)
-        self.declare_parameter('start_paused', False)
-        self.declare_parameter('start_delay', 0.0)
-        self.declare_parameter('queue_depth', 10)
+    NODE_NAME = 'bag_player'
 
-        bag = self.get_parameter('bag').value
-        self._rate = float(self.get_parameter('rate').value)
-        self._loop = bool(self.get_parameter('loop').value)
-        remaps = parse_remaps(self._string_list('remap'))
-        topics = self._string_list('topics')
-        sensor_topics = set(self._string_list('sensor_data_topics'))
-        self._publish_clock = bool(self.get_parameter('publish_clock').value)
-        self._rewrite = bool(self.get_parameter('rewrite_stamps').value)
-        self._start_delay = float(self.get_parameter('start_delay').value)
-        depth = int(self.get_parameter('queue_depth').value)
+    def __init__(self, **kwargs):
+        super().__init__(self.NODE_NAME, **kwargs)
+        p = self.params = declare(self, BagPlayerParameters)
+        bag = p.bag
+        self._rate = p.rate
+        self._loop = p.loop
+        remaps = parse_remaps(p.remap)
+        topics = p.topics
+        sensor_topics = set(p.sensor_data_topics)
+        self._publish_clock = p.publish_clock
+        self._rewrite = p.rewrite_stamps
+        self._start_delay = p.start_delay
+        depth = p.queue_depth
         if not bag:
             raise ValueError("parameter 'bag' (path of the rosbag2 directory) is required")
-        if not self._rate > 0:
-            raise ValueError(f"parameter 'rate' must be > 0, got {self._rate}")
-        if self._start_delay < 0:
-            raise ValueError(f"parameter 'start_delay' must be >= 0, got {self._start_delay}")
-        if depth < 1:
-            raise ValueError(f"parameter 'queue_depth' must be >= 1, got {depth}")
 
         messages = read_messages(bag, topics=topics or None)
         types = {}
@@ -125,14 +132,12 @@ class BagPlayer(Node):
         self._classes = classes
         self._topic_pubs = {}
         for topic, cls in classes.items():
-            qos = qos_profile_sensor_data if topic in sensor_topics else QoSProfile(
-                depth=depth, reliability=ReliabilityPolicy.RELIABLE)
-            self._topic_pubs[topic] = self.create_publisher(cls, remaps.get(topic, topic), qos)
+            profile = qos.sensor_data() if topic in sensor_topics else qos.reliable(depth)
+            self._topic_pubs[topic] = self.create_publisher(cls, remaps.get(topic, topic),
+                                                            profile)
         self._clock_pub = None
         if self._publish_clock:
-            # Like rclcpp::ClockQoS: best effort, keep last 1 (rclpy's TimeSource subscribes so).
-            self._clock_pub = self.create_publisher(
-                Clock, '/clock', QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT))
+            self._clock_pub = self.create_publisher(Clock, '/clock', qos.clock())
 
         self.published = 0
         self.published_per_topic = {topic: 0 for topic in classes}
@@ -143,7 +148,7 @@ class BagPlayer(Node):
         self.first_sent = self.last_sent = None     # monotonic times of first / last publish
         self._sim_time = bool(self.get_parameter('use_sim_time').value)
         self._cond = threading.Condition()
-        self._paused = bool(self.get_parameter('start_paused').value)
+        self._paused = p.start_paused
         self._stop = False
         self._done = threading.Event()
         self._thread = threading.Thread(target=self._play, name='bag_player', daemon=True)
@@ -155,9 +160,6 @@ class BagPlayer(Node):
             + (f', remapped {remaps}' if remaps else '')
             + (' [paused]' if self._paused else ''))
         self._thread.start()
-
-    def _string_list(self, name):
-        return list(self.get_parameter_or(name, Parameter(name, value=[])).value or [])
 
     # ------------------------------------------------------------------ control (thread-safe)
     def pause(self):
@@ -294,22 +296,8 @@ class BagPlayer(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = BagPlayer()
-        # Exit when the bag has been played (like `ros2 bag play`); spinning serves parameters.
-        spin_until_shutdown(node, done=lambda: node.finished)
-    except KeyboardInterrupt:
-        pass
-    except ValueError as exc:  # bad parameters or a bad bag (BagError)
-        rclpy.logging.get_logger('bag_player').error(str(exc))
-        return 1
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    # Exits when the bag has been played (like `ros2 bag play`); spinning serves parameters.
+    return run_node(BagPlayer, args, done=lambda node: node.finished)
 
 
 if __name__ == '__main__':

@@ -1,367 +1,403 @@
-"""Estimator: recognises the interaction pattern and the human's pace, and sends the robot the
-conditioned joint trajectory (thesis eqs. 11-13 and 15-20, recursive: core.online).
+"""estimator_node: recognises the interaction pattern and the person's pace, and sends the robot
+the conditioned joint trajectory (thesis eqs. 11-13 and 15-20, recursive: core.online). A managed
+node; the logic is estimation.planner's, on the node clock.
 
-Subscribes  /observer/wrist   geometry_msgs/PointStamped (frame observed_frame), reliable
-            /observer/event   std_msgs/Header, frame_id 'onset' | 'end' | 'gap', reliable
-Publishes   /iiwa/joint_trajectory     trajectory_msgs/JointTrajectory, reliable depth 10:
-                header.stamp = the interaction's onset stamp, joint names of the model,
-                points from the current phase (plus lookahead) to z = 1 with positions,
-                velocities, accelerations, time_from_start = z / alpha* (planning.build_plan).
-                Sent once p(k* | D) >= confidence_threshold with >= min_observations used
-                and the samples held before the onset absorbed, then at replan_rate_hz
-                while new observations arrive (replanned in the callback of the first
-                observation used after each period, so the robot reacts within one
-                observation's latency; a timer covers pauses), and a last time on 'end'.
-            /estimator/predicted_wrist nav_msgs/Path (frame observed_frame): the whole
-                predicted wrist movement, phases 0..1, pose stamps = onset + z / alpha*.
-            /estimator/posterior       std_msgs/Float64MultiArray, one dimension labelled
-                'p0,..,p{K-1},alpha,phase,confidence,component':
-                data = [p(k=0|D) .. p(k=K-1|D), alpha* (1/s), phase z in [0, 1] at the latest
-                observation, confidence = p(k*|D), k*]. Published with every replan.
-            /diagnostics               diagnostic_msgs/DiagnosticArray about every
-                diagnostics_period s: state, update latency (last/mean/max us), observations
-                used/skipped/rejected by reason, commit phase, plans sent.
-Observations outside an interaction are held for hold_window s; at an onset those from the
-(back-dated) onset on are absorbed a backlog_budget slice per callback, live ones at once
-(planning.InteractionPlanner). Times are those of the observations' stamps: an observation is
-at stamp - onset stamp.
-Timers run on the node clock (use_sim_time works). Refuses to start (ValueError, non-zero exit
-from main) without a valid model whose joints, observed DOFs and frame match the parameters.
+Subscribes  observation_topic  geometry_msgs/PointStamped (frame observed_frame), reliable
+            event_topic        std_msgs/Header, frame_id 'onset' | 'end' | 'gap', reliable
+            joint_state_topic  sensor_msgs/JointState (the robot's joints, to time catching up)
+Publishes   trajectory_topic   trajectory_msgs/JointTrajectory, reliable: header.stamp = the
+                stamp of the latest observation the plan rests on (what triggered it; the
+                'end' event's stamp for the last plan), joint names of the model, points from
+                the present (plus lookahead) to z = 1 with positions, velocities,
+                accelerations; header.stamp + time_from_start = onset + z / alpha*. Sent once
+                p(k* | D) >= confidence_threshold with >= min_observations used, then at
+                replan_rate_hz while new observations arrive, and a last time on 'end'.
+                Deactivating sends an empty trajectory: the controller stops and holds.
+            path_topic         nav_msgs/Path: the whole predicted wrist movement of the plan's
+                hypothesis, phases 0..1, pose stamps = onset + z / alpha*.
+            posterior_topic    std_msgs/Float64MultiArray, one dimension labelled
+                'p0,..,p{K-1},alpha,phase,confidence,component' (PosteriorSummary.as_array).
+            marker_topic       visualization_msgs/MarkerArray for RViz, in observed_frame: the
+                predicted wrist path of every component (opacity = its probability) and the
+                robot hand's planned path, at most marker_rate_hz.
+            /diagnostics       diagnostic_msgs/DiagnosticArray every diagnostics_period s.
 """
 
-import sys
+from dataclasses import dataclass
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped
 from nav_msgs.msg import Path
 import numpy as np
-import rclpy
-from rclpy.exceptions import NameValidationException, ParameterException
-from rclpy.logging import get_logger
-from rclpy.node import Node
-from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
-                       qos_profile_sensor_data)
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Header, MultiArrayDimension
 from trajectory_msgs.msg import JointTrajectory
+from visualization_msgs.msg import MarkerArray
 
 from mixture_ip_ros.core.online import OnlineEstimator
+from mixture_ip_ros.core.stamps import stamp_to_ns
+from mixture_ip_ros.estimation.planner import OnlinePlanner, PlannerSettings
+from mixture_ip_ros.estimation.plans import PosteriorSummary, predicted_paths, predicted_wrist
+from mixture_ip_ros.estimation.records import LatencyStats
 from mixture_ip_ros.io.model_file import load_model
-from mixture_ip_ros.robot.description import JOINT_NAMES
+from mixture_ip_ros.nodes import qos
 from mixture_ip_ros.nodes.cdr import JointTrajectoryEncoder, PathEncoder
-from mixture_ip_ros.nodes.spinning import spin_until_shutdown
-from mixture_ip_ros.estimation.planning import (
-    InteractionPlanner, LatencyStats, predicted_wrist, summary_labels)
+from mixture_ip_ros.nodes.managed import ManagedNode, run_node
+from mixture_ip_ros.nodes.markers import prediction_markers
+from mixture_ip_ros.nodes.params import finite_list, param, positive
+from mixture_ip_ros.robot.description import BASE_FRAME, JOINT_NAMES
 
 N_OBSERVED = 3   # a PointStamped carries x, y, z
+DIAGNOSTIC_NAME = 'estimator_node: estimation'
 
 
-def _stamp_ns(stamp) -> int:
-    return stamp.sec * 1_000_000_000 + stamp.nanosec
+@dataclass
+class EstimatorParameters:
+    autostart: bool = param(True, 'configure and activate at start-up; false: wait for '
+                                  'lifecycle transitions')
+    model_path: str = param('', 'trained model file (.npz from mixture-ip train); required')
+    observation_topic: str = param('/observer/wrist', 'geometry_msgs/PointStamped, reliable')
+    event_topic: str = param('/observer/event', 'std_msgs/Header, frame_id onset | end | gap')
+    joint_state_topic: str = param('/joint_states', "the robot's joints, to time catching up "
+                                                    'with a plan')
+    trajectory_topic: str = param('/iiwa/joint_trajectory', 'trajectory_msgs/JointTrajectory')
+    path_topic: str = param('/estimator/predicted_wrist', 'nav_msgs/Path of the whole '
+                                                          'predicted wrist movement')
+    posterior_topic: str = param('/estimator/posterior', 'std_msgs/Float64MultiArray [p_k.., '
+                                                         'alpha, phase, confidence, k]')
+    marker_topic: str = param('/estimator/markers', 'visualization_msgs/MarkerArray for RViz')
+    joint_names: list = param(list(JOINT_NAMES), "the robot's joints; must equal the model's "
+                                                 'controlled names')
+    observed_frame: str = param(BASE_FRAME, 'frame of the observations; must equal the '
+                                            "model's (others are rejected)")
+    n_alpha: int = param(50, 'phase-speed hypotheses per component', low=1, high=10_000)
+    min_interval: float = param(0.05, 's; observations used at most this often (mocap samples '
+                                      'are correlated: more makes the posterior overconfident)',
+                                low=0.0, high=10.0)
+    confidence_threshold: float = param(0.9, 'p(k* | D) needed before the robot moves',
+                                        low=0.0, high=1.0, dynamic=True, check=positive,
+                                        rule='> 0')
+    min_observations: int = param(3, 'observations used before the robot moves', low=1,
+                                  high=100_000, dynamic=True)
+    replan_rate_hz: float = param(10.0, 'replans per second while observations arrive (a '
+                                        'timer covers pauses)', low=0.01, high=1000.0,
+                                  dynamic=True)
+    replan_on_observation: bool = param(True, 'replan in the callback of the first '
+                                              'observation used after each period (low '
+                                              'latency); false: the timer only')
+    n_points: int = param(25, 'points per trajectory (and per predicted path)', low=2,
+                          high=1000, dynamic=True)
+    lookahead: float = param(0.1, 's; the first point lies this far ahead of the present',
+                             low=0.0, high=10.0)
+    settle_time: float = param(0.5, 's; the person at rest: the final posture is reached this '
+                                    'long after the latest observation', low=0.0, high=60.0,
+                               check=positive, rule='> 0')
+    catch_up_velocity: list = param([0.74, 0.74, 0.87, 0.65, 1.13, 1.18, 1.18],
+                                    'rad/s per joint: half the iiwa limits; plan points the '
+                                    'robot cannot reach at these are dropped',
+                                    check=finite_list(positive_values=True),
+                                    rule='one positive speed per joint')
+    diagnostics_period: float = param(1.0, 's between /diagnostics messages', low=0.001,
+                                      high=3600.0)
+    hold_window: float = param(2.5, 's of observations held outside an interaction: well over '
+                                    "the observer's max_backdate (the onset is dated back and "
+                                    'its event comes after the samples)', low=0.001,
+                               high=60.0)
+    backlog_slice: int = param(8, 'held samples conditioned on per callback after an onset '
+                                  '(live observations never wait behind them all)', low=1,
+                               high=100_000)
+    marker_rate_hz: float = param(10.0, 'RViz markers per second at most; 0 = none', low=0.0,
+                                  high=1000.0)
+    input_queue_depth: int = param(1000, 'reliable input queues: nothing is lost in a stall',
+                                   low=1, high=1_000_000)
+    output_queue_depth: int = param(10, 'reliable outputs', low=1, high=100_000)
+    log_throttle_sec: float = param(2.0, 'at most one rejection warning per this many seconds',
+                                    low=0.0, high=3600.0)
 
 
-class EstimatorNode(Node):
+class EstimatorNode(ManagedNode):
+
+    NODE_NAME = 'estimator_node'
+    SCHEMA = EstimatorParameters
 
     def __init__(self, **kwargs):
-        super().__init__('estimator_node', **kwargs)
-        try:
-            self._setup()
-        except BaseException:
-            self.destroy_node()
-            raise
+        super().__init__(self.NODE_NAME, **kwargs)
+        self.latency = LatencyStats()        # planner.observe of a used observation
+        self.plan_latency = LatencyStats()   # callback start to the trajectory sent
+        self.events = dict.fromkeys(('onset', 'end', 'gap', 'unknown'), 0)
+        self.planner = None
+        self._subscriptions_made = []
+        self._timers = []
+        self._sent_any = False
+        self._next_markers_ns = 0
 
-    def _setup(self):
-        self.declare_parameter('model_path', '')
-        self.declare_parameter('observation_topic', '/observer/wrist')
-        self.declare_parameter('event_topic', '/observer/event')
-        self.declare_parameter('trajectory_topic', '/iiwa/joint_trajectory')
-        self.declare_parameter('path_topic', '/estimator/predicted_wrist')
-        self.declare_parameter('posterior_topic', '/estimator/posterior')
-        self.declare_parameter('joint_names', list(JOINT_NAMES))
-        self.declare_parameter('observed_frame', 'iiwa_link_0')
-        self.declare_parameter('n_alpha', 50)
-        self.declare_parameter('min_interval', 0.05)
-        self.declare_parameter('confidence_threshold', 0.9)
-        self.declare_parameter('min_observations', 3)
-        self.declare_parameter('replan_rate_hz', 10.0)
-        self.declare_parameter('replan_on_observation', True)
-        self.declare_parameter('n_points', 25)
-        self.declare_parameter('lookahead', 0.1)
-        self.declare_parameter('settle_time', 0.5)
-        self.declare_parameter('joint_state_topic', '/joint_states')
-        # Joint speeds the robot may use to catch up with a new plan: half the iiwa 14 limits.
-        self.declare_parameter('catch_up_velocity', [0.74, 0.74, 0.87, 0.65, 1.13, 1.18, 1.18])
-        self.declare_parameter('diagnostics_period', 1.0)
-        # Observations held outside an interaction, s of their stamps: well over the observer's
-        # max_backdate, so that a back-dated onset (its event comes later) finds its samples.
-        self.declare_parameter('hold_window', 2.5)
-        # Time per callback spent absorbing the held samples after an onset, so that live
-        # observations do not wait behind all of them.
-        self.declare_parameter('backlog_budget', 0.002)
-        self.declare_parameter('input_queue_depth', 1000)
-        self.declare_parameter('output_queue_depth', 10)
-        self.declare_parameter('log_throttle_sec', 2.0)
-
-        param = self._param
-        model_path = param('model_path')
-        if not model_path:
+    # -- lifecycle ----------------------------------------------------------------------
+    def configure(self) -> None:
+        p = self.params
+        if not p.model_path:
             raise ValueError('parameter model_path is empty: give a trained model file '
                              '(--ros-args -p model_path:=/path/to/model.npz)')
-        self.joint_names = list(param('joint_names'))
-        self.observed_frame = param('observed_frame')
-        model, meta = load_model(model_path, controlled_names=self.joint_names)
+        if len(p.catch_up_velocity) != len(p.joint_names):
+            raise ValueError(f'parameter catch_up_velocity: {len(p.joint_names)} joints need '
+                             f'{len(p.joint_names)} speeds, got {len(p.catch_up_velocity)}')
+        model, meta = load_model(p.model_path, controlled_names=p.joint_names)
         if model.n_observed_ != N_OBSERVED:
-            raise ValueError(f'model file {model_path}: the observed agent has '
-                             f'{model.n_observed_} DOFs, {param("observation_topic")} carries '
+            raise ValueError(f'model file {p.model_path}: the observed agent has '
+                             f'{model.n_observed_} DOFs, {p.observation_topic} carries '
                              f'{N_OBSERVED} (x, y, z)')
-        if meta.get('observed_frame') != self.observed_frame:
-            raise ValueError(f"model file {model_path}: trained in frame "
+        if meta.get('observed_frame') != p.observed_frame:
+            raise ValueError(f"model file {p.model_path}: trained in frame "
                              f"{meta.get('observed_frame')!r}, observations are expected in "
-                             f'{self.observed_frame!r} (parameter observed_frame)')
-        for name in ('replan_rate_hz', 'diagnostics_period', 'log_throttle_sec', 'hold_window',
-                     'backlog_budget'):
-            if not float(param(name)) > 0:
-                raise ValueError(f'parameter {name} must be > 0, got {param(name)}')
-        for name in ('input_queue_depth', 'output_queue_depth'):
-            if int(param(name)) < 1:
-                raise ValueError(f'parameter {name} must be >= 1, got {param(name)}')
-        if int(param('n_alpha')) < 1 or not float(param('min_interval')) >= 0:
-            raise ValueError('parameters n_alpha must be >= 1 and min_interval >= 0')
-        self.model_path = model_path
-        self.model = model
-        self.metadata = meta
-        self.estimator = OnlineEstimator(model, n_alpha=int(param('n_alpha')),
-                                         min_interval=float(param('min_interval')))
+                             f'{p.observed_frame!r} (parameter observed_frame)')
+        self.model, self.metadata = model, meta
+        self.estimator = OnlineEstimator(model, n_alpha=p.n_alpha, min_interval=p.min_interval)
         self._warm_up()
-        self.planner = InteractionPlanner(
-            self.estimator, confidence_threshold=float(param('confidence_threshold')),
-            min_observations=int(param('min_observations')), n_points=int(param('n_points')),
-            lookahead=float(param('lookahead')), settle_time=float(param('settle_time')),
-            labels=meta.get('component_labels'), hold_window=float(param('hold_window')),
-            catch_up_velocity=self._catch_up_velocity(param('catch_up_velocity')))
-        self._throttle = float(param('log_throttle_sec'))
-        self._replan_period = 1.0 / float(param('replan_rate_hz'))
-        self._replan_on_observation = bool(param('replan_on_observation'))
-        self._backlog_budget = float(param('backlog_budget'))
-        self._next_replan = None   # stamp-clock time (s since onset) of the next replan
-        self._last_replan_wall = -float('inf')   # of the latest replan by an observation
-        self.latency = LatencyStats()         # OnlineEstimator update, per used observation
-        self.plan_latency = LatencyStats()    # one replan: posterior, plan, messages, publish
-        self.events = {'onset': 0, 'end': 0, 'gap': 0, 'unknown': 0}
-        self._diag_seen = (0, 0)   # rejections and plan failures at the last diagnostics
-        self._labels = ','.join(summary_labels(model.n_components))
-        self._trajectory_encoder = JointTrajectoryEncoder(self.joint_names)
-        self._path_encoder = PathEncoder(self.observed_frame)
-
-        def reliable(depth):
-            return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=int(depth),
-                              reliability=ReliabilityPolicy.RELIABLE,
-                              durability=DurabilityPolicy.VOLATILE)
-        out_qos = reliable(param('output_queue_depth'))
-        in_qos = reliable(param('input_queue_depth'))
-        self._traj_pub = self.create_publisher(JointTrajectory, param('trajectory_topic'),
-                                               out_qos)
-        self._path_pub = self.create_publisher(Path, param('path_topic'), out_qos)
-        self._post_pub = self.create_publisher(Float64MultiArray, param('posterior_topic'),
-                                               out_qos)
-        self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', reliable(10))
-        # Every callback stays in the node's default (mutually exclusive) callback group: the
-        # planner is not thread safe, also under a MultiThreadedExecutor.
-        # Events first: when both are ready in one wait, the onset is handled before the
-        # observations it precedes (the planner also holds early observations for it).
-        self.create_subscription(Header, param('event_topic'), self.on_event, in_qos)
-        self.create_subscription(PointStamped, param('observation_topic'), self.on_observation,
-                                 in_qos)
-        self.create_subscription(JointState, param('joint_state_topic'), self.on_joint_state,
-                                 qos_profile_sensor_data)
-        self.create_timer(1.0 / float(param('replan_rate_hz')), self.on_replan_timer)
-        self.create_timer(float(param('diagnostics_period')), self.publish_diagnostics)
+        self.planner = OnlinePlanner(self.estimator, self._planner_settings(p),
+                                     labels=meta.get('component_labels'),
+                                     catch_up_velocity=p.catch_up_velocity)
+        self._summary_labels = ','.join(PosteriorSummary.labels(model.n_components))
+        self._trajectory_encoder = JointTrajectoryEncoder(p.joint_names)
+        self._path_encoder = PathEncoder(p.observed_frame)
+        self._hand = _hand_kinematics(p.joint_names)
+        out = qos.reliable(p.output_queue_depth)
+        self._traj_pub = self.create_lifecycle_publisher(JointTrajectory, p.trajectory_topic,
+                                                         out)
+        self._path_pub = self.create_lifecycle_publisher(Path, p.path_topic, out)
+        self._post_pub = self.create_lifecycle_publisher(Float64MultiArray, p.posterior_topic,
+                                                         out)
+        self._marker_pub = self.create_lifecycle_publisher(MarkerArray, p.marker_topic, out)
+        self._diag_pub = self.create_lifecycle_publisher(DiagnosticArray, '/diagnostics', out)
+        self._diag_seen = (0, 0)
         labels = meta.get('component_labels')
         self.get_logger().info(
-            f'model {model_path}: {model.n_components} components'
+            f'model {p.model_path}: {model.n_components} components'
             f"{' (' + ', '.join(labels) + ')' if labels else ''}, {model.n_basis} basis "
-            f"functions; observing {param('observation_topic')} in {self.observed_frame}, "
-            f"commanding {param('trajectory_topic')}")
+            f'functions; observing {p.observation_topic} in {p.observed_frame}, commanding '
+            f'{p.trajectory_topic}')
 
-    def _param(self, name):
-        return self.get_parameter(name).value
+    def activate(self) -> None:
+        p = self.params
+        inputs = qos.reliable(p.input_queue_depth)
+        # Events and observations on one reliable queue each; an onset may come after the
+        # observations it precedes (the planner holds early observations for it).
+        self._subscriptions_made = [
+            self.create_subscription(Header, p.event_topic, self.on_event, inputs),
+            self.create_subscription(PointStamped, p.observation_topic, self.on_observation,
+                                     inputs),
+            self.create_subscription(JointState, p.joint_state_topic, self.on_joint_state,
+                                     qos.sensor_data()),
+        ]
+        self._replan_timer = self.create_timer(1.0 / p.replan_rate_hz, self.on_replan_timer)
+        self._timers = [self._replan_timer,
+                        self.create_timer(p.diagnostics_period, self.publish_diagnostics)]
 
-    def _catch_up_velocity(self, value):
-        v = np.asarray(value, dtype=float)
-        if v.shape != (len(self.joint_names),) or not np.all(np.isfinite(v) & (v > 0)):
-            raise ValueError(f'parameter catch_up_velocity must be {len(self.joint_names)} '
-                             f'positive speeds, got {list(value)}')
-        return v
+    def deactivate(self) -> None:
+        """Stop commanding at once: the controller gets an empty trajectory (stop and hold),
+        the interaction in progress ends, no input is taken any more."""
+        for sub in self._subscriptions_made:
+            self.destroy_subscription(sub)
+        for timer in self._timers:
+            self.destroy_timer(timer)
+        self._subscriptions_made, self._timers = [], []
+        if self.planner is None:
+            return
+        if self._sent_any:
+            self._traj_pub.publish(JointTrajectory(joint_names=list(self.params.joint_names)))
+            self._sent_any = False
+        if self.planner.active:
+            self.planner.deactivate()
+            self.get_logger().warning('deactivated during an interaction: the robot holds')
 
-    def on_joint_state(self, msg: JointState) -> None:
-        try:
-            index = {name: i for i, name in enumerate(msg.name)}
-            q = np.array([msg.position[index[n]] for n in self.joint_names])
-            if np.all(np.isfinite(q)):
-                self.planner.robot_q = q
-        except (KeyError, IndexError):
-            self.planner.reject('bad_joint_state')
+    def cleanup(self) -> None:
+        for name in ('_traj_pub', '_path_pub', '_post_pub', '_marker_pub', '_diag_pub'):
+            pub = getattr(self, name, None)
+            if pub is not None:
+                self.destroy_lifecycle_publisher(pub)
+                setattr(self, name, None)
+        self.planner = self.estimator = self.model = None
+
+    def apply_parameters(self, changes: dict) -> None:
+        if self.planner is not None:
+            self.planner.update_settings(**self._planner_settings(changes, partial=True))
+        if 'replan_rate_hz' in changes and self._timers:
+            self.destroy_timer(self._replan_timer)
+            self._replan_timer = self.create_timer(1.0 / changes['replan_rate_hz'],
+                                                   self.on_replan_timer)
+            self._timers[0] = self._replan_timer
+        super().apply_parameters(changes)
+
+    @staticmethod
+    def _planner_settings(p, partial=False):
+        get = (lambda n: p.get(n)) if partial else (lambda n: getattr(p, n))
+        names = ('confidence_threshold', 'min_observations', 'n_points', 'lookahead',
+                 'settle_time', 'hold_window', 'backlog_slice', 'replan_on_observation')
+        values = {n: get(n) for n in names if get(n) is not None}
+        if get('replan_rate_hz') is not None:
+            values['replan_period'] = 1.0 / get('replan_rate_hz')
+        return values if partial else PlannerSettings(**values)
 
     def _warm_up(self):
-        # First update compiles the numba kernel (cached on disk); do it now, not mid-reach.
+        # The first update compiles the numba kernels (cached on disk): now, not mid-reach.
         self.estimator.update(0.0, np.zeros(self.estimator.n_observed))
         self.estimator.predict(np.linspace(0.0, 1.0, 3))
         self.estimator.mean_trajectories([0.5], [0.5])
         self.estimator.reset()
 
+    # -- queries ------------------------------------------------------------------------
     @property
     def interactions(self):
-        """One dict per interaction (planning.InteractionPlanner.interactions)."""
-        return self.planner.interactions
+        """One record per interaction (estimation.records.Interaction), the last is current."""
+        return self.planner.interactions if self.planner is not None else []
 
     @property
     def state(self) -> str:
-        return self.planner.state
+        """The interaction state (idle, observing, committed, done)."""
+        return self.planner.state if self.planner is not None else 'idle'
+
+    def _now_ns(self) -> int:
+        return self.get_clock().now().nanoseconds
 
     # -- callbacks: never raise --------------------------------------------------------
     def on_observation(self, msg: PointStamped) -> None:
         try:
-            if msg.header.frame_id != self.observed_frame:
+            t0 = time.perf_counter()
+            if msg.header.frame_id != self.params.observed_frame:
                 self._warn_rejected(self.planner.refuse('wrong_frame'),
                                     f'frame {msg.header.frame_id!r}')
                 return
             p = msg.point
-            t0 = time.perf_counter()
-            result = self.planner.observe(_stamp_ns(msg.header.stamp), (p.x, p.y, p.z))
+            result, due = self.planner.observe(stamp_to_ns(msg.header.stamp), (p.x, p.y, p.z),
+                                               self._now_ns())
             if result == 'used':
                 self.latency.add(time.perf_counter() - t0)
             elif result not in ('skipped', 'held'):
                 self._warn_rejected(result, f'stamp {msg.header.stamp.sec}.'
                                             f'{msg.header.stamp.nanosec:09d}')
-                return
-            absorbed_all = self._absorb_slice()
-            # Replan right away (at most at replan_rate_hz on the stamps' clock): the robot
-            # reacts within the observation's latency, not a timer period. Also limited on the
-            # wall clock, for streams replayed faster than real time (the timer follows up).
-            t = self.planner.t_now
-            if result == 'used' and self._replan_on_observation and (
-                    self._next_replan is None or t >= self._next_replan - 1e-9) and (
-                    time.perf_counter() - self._last_replan_wall >= self._replan_period):
-                self._next_replan = t + self._replan_period
-                self._last_replan_wall = time.perf_counter()
-                self.replan()
-            elif absorbed_all:
-                self.replan()     # on all the evidence: the robot may be committed now
+            if due:
+                self.replan(t0)
         except Exception as exc:  # a bad message must not kill the node
             self.planner.reject('exception')
             self.get_logger().error(f'observation dropped, callback failed: {exc!r}',
-                                    throttle_duration_sec=self._throttle)
+                                    throttle_duration_sec=self.params.log_throttle_sec)
 
     def on_event(self, msg: Header) -> None:
         try:
+            t0 = time.perf_counter()
             kind = msg.frame_id
-            stamp_ns = _stamp_ns(msg.stamp)
-            if kind == 'onset':
-                self.events['onset'] += 1
-                self._next_replan = None
-                if self.planner.active:
-                    self._log_unfinished()
-                self.planner.onset(stamp_ns)
-                self.get_logger().info(f'onset at {msg.stamp.sec}.{msg.stamp.nanosec:09d}: '
-                                       f'new interaction, {self.planner.n_backlog} held '
-                                       'observations to absorb')
-                if self._absorb_slice():
-                    self.replan()
-            elif kind == 'end':
-                self.events['end'] += 1
-                if self.planner.active:
-                    t0 = time.perf_counter()
-                    self._publish_step(self.planner.end(stamp_ns, self._clock_since_onset()), t0)
-                    self._log_finished(self.planner.current)
-            elif kind == 'gap':
-                self.events['gap'] += 1
-                self.planner.gap()
-            else:
+            if kind not in ('onset', 'end', 'gap'):
                 self.events['unknown'] += 1
                 self.get_logger().warning(f'unknown event {kind!r} ignored',
-                                          throttle_duration_sec=self._throttle)
+                                          throttle_duration_sec=self.params.log_throttle_sec)
+                return
+            self.events[kind] += 1
+            if kind == 'onset':
+                if self.planner.active:
+                    self.get_logger().warning('onset before the previous interaction ended: '
+                                              'starting over')
+                due = self.planner.onset(stamp_to_ns(msg.stamp))
+                self.get_logger().info(f'onset at {msg.stamp.sec}.{msg.stamp.nanosec:09d}: new '
+                                       f'interaction, {self.planner.n_backlog} held '
+                                       'observations to absorb')
+                if due:
+                    self.replan(t0)
+            elif kind == 'end':
+                if self.planner.active:
+                    self._publish(self.planner.end(stamp_to_ns(msg.stamp), self._now_ns()), t0)
+                    self._log_finished(self.planner.current)
+            else:
+                self.planner.gap()
         except Exception as exc:
             self.get_logger().error(f'event {msg.frame_id!r} failed: {exc!r}',
-                                    throttle_duration_sec=self._throttle)
+                                    throttle_duration_sec=self.params.log_throttle_sec)
 
-    def _clock_since_onset(self):
-        """The node clock (sim time with use_sim_time) in s since the onset, or None."""
-        onset = self.planner.onset_ns
-        return None if onset is None else (self.get_clock().now().nanoseconds - onset) * 1e-9
+    def on_joint_state(self, msg: JointState) -> None:
+        try:
+            index = {name: i for i, name in enumerate(msg.name)}
+            q = np.array([msg.position[index[n]] for n in self.params.joint_names])
+            if np.all(np.isfinite(q)):
+                self.planner.robot_q = q
+        except (KeyError, IndexError):
+            self.planner.reject('bad_joint_state')
 
     def on_replan_timer(self) -> None:
-        """Covers pauses: replans unless an observation replanned within the last period."""
-        if self._absorb_slice() or (
-                time.perf_counter() - self._last_replan_wall >= self._replan_period):
-            self.replan()
-
-    def _absorb_slice(self) -> bool:
-        """backlog_budget s of the samples held before the onset; True if that was the last."""
-        if not self.planner.n_backlog:
-            return False
-        self.planner.absorb_backlog(self._backlog_budget)
-        return self.planner.n_backlog == 0
-
-    def replan(self) -> None:
-        """Update the posterior summary, the predicted path and (once committed) the robot's
-        trajectory from what was observed so far."""
         try:
-            t0 = time.perf_counter()
-            self._publish_step(self.planner.step(clock_now=self._clock_since_onset()), t0)
+            if self.planner.tick(self._now_ns()):
+                self.replan(time.perf_counter())
         except Exception as exc:
             self.get_logger().error(f'replanning failed: {exc!r}',
-                                    throttle_duration_sec=self._throttle)
+                                    throttle_duration_sec=self.params.log_throttle_sec)
+
+    def replan(self, t0: float = None) -> None:
+        """Replan on what was observed so far and publish; ``t0``: when the callback started."""
+        self._publish(self.planner.replan(self._now_ns()),
+                      time.perf_counter() if t0 is None else t0)
 
     # -- output ------------------------------------------------------------------------
-    def _publish_step(self, step, t0) -> None:
-        """Publish what a replan produced; ``t0``: when the replan started (its latency)."""
+    def _publish(self, step, t0: float) -> None:
+        """Publish what a replan produced: the trajectory first (it is what the latency is
+        about), then the posterior, the predicted path and the markers."""
         if step is None:
             return
         onset_ns = self.planner.onset_ns
         plan = step.plan if step.problem is None else None
-        # The robot's trajectory first, serialized directly (nodes.cdr): it is what the
-        # latency is about; the posterior and the predicted path follow.
         if plan is not None and step.send:
+            trigger = step.trigger_ns
             self._traj_pub.publish(self._trajectory_encoder.encode(
-                onset_ns, np.round(plan.times * 1e9).astype(np.int64), plan.positions,
-                plan.velocities, plan.accelerations))
+                trigger, onset_ns + np.round(plan.times * 1e9).astype(np.int64) - trigger,
+                plan.positions, plan.velocities, plan.accelerations))
+            self._sent_any = True
+            self.plan_latency.add(time.perf_counter() - t0)
         self._post_pub.publish(self._posterior_msg(step.summary))
         if plan is None:
             self.get_logger().error(f'plan not published: {step.problem}',
-                                    throttle_duration_sec=self._throttle)
+                                    throttle_duration_sec=self.params.log_throttle_sec)
             return
-        self._publish_path(plan, onset_ns)
+        self._publish_path(plan, onset_ns, step.trigger_ns)
+        self._publish_markers(step, onset_ns)
         if step.send:
             rec = self.planner.current
             if step.committed_now:
                 self.get_logger().info(
-                    f"committed to component {plan.component}{self._label(plan.component)} "
-                    f"(p = {rec['confidence']:.3f}) at phase {rec['commit_phase']:.3f} after "
-                    f"{rec['commit_observations']} observations, alpha* = {plan.alpha:.3f}/s")
+                    f'committed to component {plan.component}{self._label(plan.component)} '
+                    f'(p = {rec.confidence:.3f}) at phase {rec.commit_phase:.3f} after '
+                    f'{rec.commit_observations} observations, alpha* = {plan.alpha:.3f}/s')
             if step.switched_from is not None:
                 self.get_logger().info(
                     f'switching from component {step.switched_from}'
                     f'{self._label(step.switched_from)} to {plan.component}'
-                    f"{self._label(plan.component)} at phase {rec['phase']:.3f}")
-        self.plan_latency.add(time.perf_counter() - t0)
+                    f'{self._label(plan.component)} at phase {rec.phase:.3f}')
 
-    def _publish_path(self, plan, onset_ns) -> None:
-        """The whole predicted wrist movement under the plan's hypothesis (for RViz)."""
-        times, positions = predicted_wrist(self.estimator, plan, self.planner.n_points)
+    def _publish_path(self, plan, onset_ns, stamp_ns) -> None:
+        times, positions = predicted_wrist(self.estimator, plan, self.params.n_points)
         if not np.isfinite(positions).all():
             self.get_logger().error('predicted wrist path not published: non-finite',
-                                    throttle_duration_sec=self._throttle)
+                                    throttle_duration_sec=self.params.log_throttle_sec)
             return
         self._path_pub.publish(self._path_encoder.encode(
-            onset_ns + round(self.planner.t_now * 1e9),
-            onset_ns + np.round(times * 1e9).astype(np.int64), positions))
+            stamp_ns, onset_ns + np.round(times * 1e9).astype(np.int64), positions))
+
+    def _publish_markers(self, step, onset_ns) -> None:
+        rate = self.params.marker_rate_hz
+        now = self._now_ns()
+        if rate <= 0 or now < self._next_markers_ns or self._marker_pub.get_subscription_count() == 0:
+            return
+        self._next_markers_ns = now + round(1e9 / rate)
+        paths = [(k, step.summary.probabilities[k], positions)
+                 for k, _, _, positions in predicted_paths(self.estimator, self.params.n_points)]
+        hand = None
+        if self._hand is not None and step.send:
+            hand = self._hand.fk_positions(step.plan.positions)
+        self._marker_pub.publish(prediction_markers(
+            self.params.observed_frame, self.get_clock().now().to_msg(), paths, hand,
+            [self._label(k).strip(' ()') or f'component {k}' for k, _, _ in paths]))
 
     def _posterior_msg(self, summary) -> Float64MultiArray:
+        data = summary.as_array()
         msg = Float64MultiArray()
-        msg.layout.dim = [MultiArrayDimension(label=self._labels, size=len(summary),
-                                              stride=len(summary))]
-        msg.data = summary.tolist()
+        msg.layout.dim = [MultiArrayDimension(label=self._summary_labels, size=len(data),
+                                              stride=len(data))]
+        msg.data = data.tolist()
         return msg
 
     def publish_diagnostics(self) -> None:
@@ -369,43 +405,44 @@ class EstimatorNode(Node):
             self._diag_pub.publish(self.diagnostics_msg())
         except Exception as exc:
             self.get_logger().error(f'diagnostics failed: {exc!r}',
-                                    throttle_duration_sec=self._throttle)
+                                    throttle_duration_sec=self.params.log_throttle_sec)
 
     def diagnostics_msg(self) -> DiagnosticArray:
         pl = self.planner
-        rec = pl.current or {}
+        counts = pl.counts
+        rec = pl.current
         values = {
             'state': pl.state,
             'interactions': len(pl.interactions),
-            'component': rec.get('component'),
-            'label': rec.get('label'),
-            'confidence': rec.get('confidence'),
-            'alpha': rec.get('alpha'),
-            'phase': rec.get('phase'),
-            'commit_phase': rec.get('commit_phase'),
-            'switches': len(rec.get('switches', [])),
-            'observations_received': pl.received,
-            'observations_used': pl.used,
-            'observations_skipped': pl.skipped,
+            'component': rec and rec.component,
+            'label': rec and rec.label,
+            'confidence': rec and rec.confidence,
+            'alpha': rec and rec.alpha,
+            'phase': rec and rec.phase,
+            'commit_phase': rec and rec.commit_phase,
+            'switches': len(rec.switches) if rec else 0,
+            'observations_received': counts.received,
+            'observations_used': counts.used,
+            'observations_skipped': counts.skipped,
             'observations_held': pl.n_held,
             'observations_backlog': pl.n_backlog,
-            'interaction_observations_used': rec.get('n_observations'),
-            **{f'rejected_{k}': v for k, v in pl.rejected.items()},
+            'interaction_observations_used': rec and rec.n_observations,
+            **{f'rejected_{k}': v for k, v in counts.rejected.items()},
             'update_latency_last_us': round(self.latency.last_us, 1),
             'update_latency_mean_us': round(self.latency.mean_us, 1),
             'update_latency_max_us': round(self.latency.max_us, 1),
             'plan_latency_last_us': round(self.plan_latency.last_us, 1),
+            'plan_latency_mean_us': round(self.plan_latency.mean_us, 1),
             'plan_latency_max_us': round(self.plan_latency.max_us, 1),
-            'plans_sent': pl.plans_sent,
-            'plan_failures': pl.plan_failures,
+            'plans_sent': counts.plans_sent,
+            'plan_failures': counts.plan_failures,
             'events_unknown': self.events['unknown'],
         }
         # WARN while problems are new (since the previous message); totals stay in the values.
-        n_rejected = sum(pl.rejected.values())
-        new_rejected = n_rejected - self._diag_seen[0]
-        new_failures = pl.plan_failures - self._diag_seen[1]
-        self._diag_seen = (n_rejected, pl.plan_failures)
-        status = DiagnosticStatus(name='estimator_node: estimation', hardware_id='mixture_ip_ros')
+        new_rejected = counts.n_rejected - self._diag_seen[0]
+        new_failures = counts.plan_failures - self._diag_seen[1]
+        self._diag_seen = (counts.n_rejected, counts.plan_failures)
+        status = DiagnosticStatus(name=DIAGNOSTIC_NAME, hardware_id='mixture_ip_ros')
         if new_failures:
             status.level = DiagnosticStatus.WARN
             status.message = f'{pl.state}; {new_failures} plans not published (non-finite)'
@@ -422,53 +459,43 @@ class EstimatorNode(Node):
         msg.status = [status]
         return msg
 
-    # -- logging ----------------------------------------------------------------------
+    # -- logging ------------------------------------------------------------------------
     def _label(self, k) -> str:
         lbl = self.planner.label(k)
         return f' ({lbl})' if lbl is not None else ''
 
     def _warn_rejected(self, reason, detail) -> None:
-        counts = {k: v for k, v in self.planner.rejected.items() if v}
+        counts = {k: v for k, v in self.planner.counts.rejected.items() if v}
         self.get_logger().warning(f'observation rejected ({reason}, {detail}); rejected so far: '
-                                  f'{counts}', throttle_duration_sec=self._throttle)
+                                  f'{counts}', throttle_duration_sec=self.params.log_throttle_sec)
 
     def _log_finished(self, rec) -> None:
-        if rec['commit_phase'] is None:
+        if not rec.committed:
+            confidence = rec.confidence if rec.confidence is not None else float('nan')
             self.get_logger().warning(
-                f"interaction ended without a confident component (p(k*) = "
-                f"{rec['confidence'] if rec['confidence'] is not None else float('nan'):.3f} "
-                f"< {self.planner.confidence_threshold} or fewer than "
-                f'{self.planner.min_observations} observations): robot not moved')
+                f'interaction ended without a confident component (p(k*) = {confidence:.3f} < '
+                f'{self.planner.settings.confidence_threshold} or fewer than '
+                f'{self.planner.settings.min_observations} observations): robot not moved')
             return
         self.get_logger().info(
-            f"interaction done: component {rec['component']}{self._label(rec['component'])}, "
-            f"alpha* = {rec['alpha']:.3f}/s, committed at phase {rec['commit_phase']:.3f}, "
-            f"{rec['n_observations']} observations used, {rec['plans']} plans, "
-            f"{len(rec['switches'])} switches")
+            f'interaction done: component {rec.component}{self._label(rec.component)}, '
+            f'alpha* = {rec.alpha:.3f}/s, committed at phase {rec.commit_phase:.3f}, '
+            f'{rec.n_observations} observations used, {rec.plans} plans, '
+            f'{len(rec.switches)} switches')
 
-    def _log_unfinished(self) -> None:
-        self.get_logger().warning('onset before the previous interaction ended: starting over')
+
+def _hand_kinematics(joint_names):
+    """Kinematics for the robot hand's planned path in the markers, when the joints are the
+    robot's (None otherwise: no hand path)."""
+    if list(joint_names) != list(JOINT_NAMES):
+        return None
+    from mixture_ip_ros.robot.kinematics import IiwaKinematics
+    return IiwaKinematics()
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    try:
-        node = EstimatorNode()
-    except KeyboardInterrupt:
-        rclpy.try_shutdown()
-        return 0
-    except (ValueError, ParameterException, NameValidationException) as exc:
-        # Expected refusals (no/corrupt/mismatched model, bad parameters): a message, no trace.
-        get_logger('estimator_node').fatal(f'refusing to start: {exc}')
-        rclpy.try_shutdown()
-        return 1
-    try:
-        spin_until_shutdown(node)
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(EstimatorNode, args)
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    raise SystemExit(main())

@@ -1,218 +1,215 @@
-"""Observer: cleans the mocap wrist stream and marks the interaction (onset, end, gaps).
+"""observer_node: cleans the mocap wrist stream and marks the interaction (onset, end, gaps). A
+managed node; the logic is estimation.observer's.
 
-Subscribes  /mocap/wrist     geometry_msgs/PoseStamped (sensor-data QoS)
-Publishes   /observer/wrist  geometry_msgs/PointStamped in the robot base frame with the
-                             original stamps: every accepted pose, as it comes
-            /observer/event  std_msgs/Header, frame_id 'onset' | 'end' | 'gap', stamp = when
-                             (a gap's stamp is the last sample before the silence)
-Both outputs are reliable with a deep queue: the estimator must not lose observations.
-An onset is confirmed some 0.1-1 s after the hand left rest and back-dated to then: the
-estimator holds the recent samples and takes those from the onset on when the event comes
-(forwarding them only then would send a burst of ~40 messages that live samples queue
-behind). A pose's own observation goes out before the events it settles. Poses that fail a
-check are dropped and counted (``drop_counts``); the logic lives in core.pose_validation and
-core.segmentation, which are tested without ROS.
+Subscribes  wrist_topic        geometry_msgs/PoseStamped (sensor-data QoS)
+Publishes   observation_topic  geometry_msgs/PointStamped in base_frame with the original
+                               stamps: every accepted pose, as it comes
+            event_topic        std_msgs/Header, frame_id 'onset' | 'end' | 'gap', stamp = when
+                               (a gap's stamp is the last sample before the silence)
+Both outputs are reliable with a deep queue: the estimator must not lose observations. A pose's
+own observation goes out before the events it settles. Poses that fail a check are dropped and
+counted.
 """
 
-import copy
+from dataclasses import dataclass
 import inspect
 import time
 
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PointStamped, PoseStamped
-import rclpy
-from rclpy.node import Node
-from rclpy.qos import (
-    DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy)
 from std_msgs.msg import Header
 
-from mixture_ip_ros.core.frames import FrameTransform
+from mixture_ip_ros.core.frames import QUATERNION_TOLERANCE, FrameTransform
+from mixture_ip_ros.core.segmentation import MotionSegmenter
 from mixture_ip_ros.core.stamps import ns_to_parts, stamp_to_ns
-from mixture_ip_ros.estimation.pose_check import check_pose, POSE_REJECT_REASONS
-from mixture_ip_ros.core.segmentation import Event, MotionSegmenter
-from mixture_ip_ros.nodes.spinning import spin_until_shutdown
+from mixture_ip_ros.estimation.observer import WristObserver
+from mixture_ip_ros.nodes import qos
+from mixture_ip_ros.nodes.managed import ManagedNode, run_node
+from mixture_ip_ros.nodes.params import finite_list, param, positive
+from mixture_ip_ros.robot.description import BASE_FRAME
 
+# One source for the segmentation defaults: offline training (segment_motion) uses the same, so
+# time zero agrees online and offline.
 SEGMENTER_DEFAULTS = {name: p.default
                       for name, p in inspect.signature(MotionSegmenter).parameters.items()}
 
 
-class ObserverNode(Node):
+def _unit_quaternion(q):
+    why = finite_list(4)(q)
+    if why:
+        return why
+    norm = sum(v * v for v in q) ** 0.5
+    return None if abs(norm - 1.0) <= QUATERNION_TOLERANCE else f'is not unit length ({norm:g})'
+
+
+def _segmenter(name, description, **kw):
+    return param(SEGMENTER_DEFAULTS[name], description, **kw)
+
+
+@dataclass
+class ObserverParameters:
+    autostart: bool = param(True, 'configure and activate at start-up; false: wait for '
+                                  'lifecycle transitions')
+    wrist_topic: str = param('/mocap/wrist', 'geometry_msgs/PoseStamped, sensor-data QoS')
+    observation_topic: str = param('/observer/wrist', 'geometry_msgs/PointStamped, reliable')
+    event_topic: str = param('/observer/event', 'std_msgs/Header, frame_id onset | end | gap')
+    expected_frame: str = param('world', "poses in another frame are dropped ('' = any)")
+    base_frame: str = param(BASE_FRAME, 'frame of the published points')
+    mocap_to_base_xyz: list = param([0.0, 0.0, 0.0], 'm; mocap frame origin in the base frame '
+                                                     '(p_base = R p_mocap + t)',
+                                    check=finite_list(3), rule='3 finite numbers')
+    mocap_to_base_xyzw: list = param([0.0, 0.0, 0.0, 1.0], 'mocap frame orientation in the base '
+                                                           'frame, quaternion x, y, z, w',
+                                     check=_unit_quaternion, rule='a unit quaternion')
+    quaternion_tolerance: float = param(0.01, '| |q| - 1 | above this drops the pose',
+                                        low=0.0, high=1.0)
+    onset_speed: float = _segmenter('onset_speed', 'm/s the wrist must exceed ...',
+                                    low=0.0, high=100.0, check=positive, rule='> 0')
+    onset_hold: float = _segmenter('onset_hold', '... for this long (s) to confirm an onset',
+                                   low=0.0, high=10.0)
+    end_speed: float = _segmenter('end_speed', 'm/s the wrist must stay below ...', low=0.0,
+                                  high=100.0, check=positive, rule='> 0, < onset_speed')
+    end_hold: float = _segmenter('end_hold', '... for this long (s) to confirm the end',
+                                 low=0.0, high=10.0, check=positive, rule='> 0')
+    speed_window: float = _segmenter('speed_window', 's, least-squares velocity window '
+                                                     '(longer = less noise, more lag)',
+                                     low=0.0, high=10.0, check=positive, rule='> 0')
+    min_window_samples: int = _segmenter('min_window_samples', 'fewer samples in the window: '
+                                                               'no speed estimate', low=3,
+                                         high=100_000)
+    gap_timeout: float = _segmenter('gap_timeout', "s without samples = a gap ('gap' event, the "
+                                                   'velocity window restarts)', low=0.0,
+                                    high=60.0, check=positive, rule='> 0')
+    max_gap: float = _segmenter('max_gap', "s without samples during an interaction = tracking "
+                                           "lost ('end')", low=0.0, high=600.0, check=positive,
+                                rule='>= gap_timeout')
+    max_backdate: float = _segmenter('max_backdate', 's, the latest an onset can be dated '
+                                                     'before its detection', low=0.0,
+                                     high=60.0, check=positive, rule='> 0')
+    input_queue_depth: int = param(100, 'mocap subscription depth (best effort)', low=1,
+                                   high=1_000_000)
+    output_queue_depth: int = param(1000, 'reliable outputs: 2 s of 500 Hz mocap', low=1,
+                                    high=1_000_000)
+    log_throttle_sec: float = param(2.0, 'at most one drop warning per this many seconds',
+                                    low=0.0, high=3600.0)
+    restart_after_backwards: int = param(50, 'consecutive older stamps = the stream restarted '
+                                             '(0 = never)', low=0, high=1_000_000)
+
+
+class ObserverNode(ManagedNode):
+
+    NODE_NAME = 'observer_node'
+    SCHEMA = ObserverParameters
 
     def __init__(self, **kwargs):
-        super().__init__('observer_node', **kwargs)
-        self.declare_parameter('wrist_topic', '/mocap/wrist')
-        self.declare_parameter('observation_topic', '/observer/wrist')
-        self.declare_parameter('event_topic', '/observer/event')
-        # Frame the mocap poses must carry ('' accepts any) and the frame published.
-        self.declare_parameter('expected_frame', 'world')
-        self.declare_parameter('base_frame', 'iiwa_link_0')
-        # Mocap frame origin and orientation in the base frame: p_base = R p_mocap + t.
-        self.declare_parameter('mocap_to_base_xyz', [0.0, 0.0, 0.0])
-        self.declare_parameter('mocap_to_base_xyzw', [0.0, 0.0, 0.0, 1.0])
-        self.declare_parameter('quaternion_tolerance', 0.01)
-        for name, default in SEGMENTER_DEFAULTS.items():
-            self.declare_parameter(name, default)
-        self.declare_parameter('input_queue_depth', 100)
-        self.declare_parameter('output_queue_depth', 1000)
-        self.declare_parameter('log_throttle_sec', 2.0)
-        # Consecutive poses older than the last accepted one after which the stream is taken
-        # to have restarted (bag replayed, mocap clock reset); 0 never restarts.
-        self.declare_parameter('restart_after_backwards', 50)
-
-        param = self._param
-        self._expected_frame = param('expected_frame')
-        self._base_frame = param('base_frame')
-        self._quat_tol = float(param('quaternion_tolerance'))
-        self._throttle = float(param('log_throttle_sec'))
-        self._restart_after = int(param('restart_after_backwards'))
-        self.transform = FrameTransform(list(param('mocap_to_base_xyz')),
-                                        list(param('mocap_to_base_xyzw')))
-        self.segmenter = MotionSegmenter(**{name: param(name) for name in SEGMENTER_DEFAULTS})
-        self.moving = False   # between an 'onset' and its 'end'
-        self._gap_timeout = self.segmenter.gap_timeout
-
-        # Counters for monitoring and tests.
-        self.drop_counts = {reason: 0 for reason in POSE_REJECT_REASONS}
-        self.accepted = 0
-        self.published = {'observations': 0, 'onset': 0, 'end': 0, 'gap': 0}
-        self.stream_restarts = 0
-
-        self._last_stamp_ns = None   # last accepted stamp
-        self._t_ref_ns = None        # stream times are seconds since this stamp (float precision)
-        self._last_arrival_ns = None  # node clock when the last pose was accepted
-        self._backwards = 0
+        super().__init__(self.NODE_NAME, **kwargs)
+        self.observer = None
+        self._sub = self._timer = None
         self._next_drop_log = 0.0
 
-        reliable = QoSProfile(history=HistoryPolicy.KEEP_LAST,
-                              depth=int(param('output_queue_depth')),
-                              reliability=ReliabilityPolicy.RELIABLE,
-                              durability=DurabilityPolicy.VOLATILE)
-        sensor = copy.copy(qos_profile_sensor_data)  # best effort, volatile ...
-        sensor.depth = int(param('input_queue_depth'))  # ... with room for 500 Hz bursts
-        self._obs_pub = self.create_publisher(PointStamped, param('observation_topic'), reliable)
-        self._event_pub = self.create_publisher(Header, param('event_topic'), reliable)
-        self.create_subscription(PoseStamped, param('wrist_topic'), self.on_pose, sensor)
-        self.create_timer(max(self._gap_timeout / 4.0, 0.005), self.on_timer)
+    # -- lifecycle ----------------------------------------------------------------------
+    def configure(self) -> None:
+        p = self.params
+        segmenter = MotionSegmenter(**{name: getattr(p, name) for name in SEGMENTER_DEFAULTS})
+        self.observer = WristObserver(
+            segmenter, FrameTransform(p.mocap_to_base_xyz, p.mocap_to_base_xyzw),
+            expected_frame=p.expected_frame, quaternion_tolerance=p.quaternion_tolerance,
+            restart_after_backwards=p.restart_after_backwards)
+        out = qos.reliable(p.output_queue_depth)
+        self._obs_pub = self.create_lifecycle_publisher(PointStamped, p.observation_topic, out)
+        self._event_pub = self.create_lifecycle_publisher(Header, p.event_topic, out)
         self.get_logger().info(
-            f"observing {param('wrist_topic')} (frame {self._expected_frame or 'any'}) -> "
-            f"{param('observation_topic')} in {self._base_frame}, "
-            f"events on {param('event_topic')}")
+            f"observing {p.wrist_topic} (frame {p.expected_frame or 'any'}) -> "
+            f'{p.observation_topic} in {p.base_frame}, events on {p.event_topic}')
 
-    def _param(self, name):
-        return self.get_parameter(name).value
+    def activate(self) -> None:
+        p = self.params
+        self._sub = self.create_subscription(PoseStamped, p.wrist_topic, self.on_pose,
+                                             qos.sensor_data(p.input_queue_depth))
+        self._timer = self.create_timer(max(p.gap_timeout / 4.0, 0.005), self.on_timer)
+
+    def deactivate(self) -> None:
+        if self._sub is not None:
+            self.destroy_subscription(self._sub)
+            self.destroy_timer(self._timer)
+        self._sub = self._timer = None
+
+    def cleanup(self) -> None:
+        for pub in (getattr(self, '_obs_pub', None), getattr(self, '_event_pub', None)):
+            if pub is not None:
+                self.destroy_lifecycle_publisher(pub)
+        self._obs_pub = self._event_pub = None
+        self.observer = None
+
+    # -- queries (counts since configure) -------------------------------------------------
+    @property
+    def accepted(self) -> int:
+        return self.observer.counts.accepted
+
+    @property
+    def drop_counts(self) -> dict:
+        return self.observer.counts.dropped
+
+    @property
+    def published(self) -> dict:
+        return self.observer.counts.published
+
+    @property
+    def moving(self) -> bool:
+        return self.observer.moving
 
     # -- callbacks: never raise ---------------------------------------------------------
     def on_pose(self, msg: PoseStamped) -> None:
         try:
-            self._handle_pose(msg)
+            stamp = msg.header.stamp
+            p, q = msg.pose.position, msg.pose.orientation
+            out = self.observer.on_pose(stamp_to_ns(stamp), msg.header.frame_id,
+                                        (p.x, p.y, p.z), (q.x, q.y, q.z, q.w),
+                                        self.get_clock().now().nanoseconds)
         except Exception as exc:  # a bad message must not kill the node
-            self.drop_counts['exception'] += 1
+            self.observer.drop('exception')
             self._log_drop(f'wrist pose dropped, callback failed: {exc!r}')
+            return
+        if out.rejected is not None:
+            self._log_drop(f'wrist pose dropped ({out.rejected}, frame '
+                           f'{msg.header.frame_id!r}, stamp {stamp.sec}.{stamp.nanosec:09d})')
+            return
+        if out.restarted:
+            self.get_logger().warning(
+                f'{self.params.restart_after_backwards} consecutive wrist poses older than '
+                'the last accepted one: taking the stream as restarted')
+        point = PointStamped()
+        point.header.stamp = stamp
+        point.header.frame_id = self.params.base_frame
+        point.point.x, point.point.y, point.point.z = out.point
+        self._obs_pub.publish(point)
+        self._publish_events(out.events)
 
     def on_timer(self) -> None:
         try:
-            if self._last_arrival_ns is None:
-                return
-            silence = (self.get_clock().now().nanoseconds - self._last_arrival_ns) * 1e-9
-            if silence > self._gap_timeout:
-                # Stream time now, judged by our clock: mocap and node clocks may be offset.
-                t_now = self.segmenter.last_time + silence
-                self._publish_events(self.segmenter.gap(t_now))
+            self._publish_events(self.observer.on_timer(self.get_clock().now().nanoseconds))
         except Exception as exc:
             self.get_logger().error(f'gap check failed: {exc!r}',
-                                    throttle_duration_sec=self._throttle)
-
-    # -- logic --------------------------------------------------------------------------
-    def _handle_pose(self, msg: PoseStamped) -> None:
-        stamp = msg.header.stamp
-        stamp_ns = stamp_to_ns(stamp)
-        p = msg.pose.position
-        q = msg.pose.orientation
-        position = (p.x, p.y, p.z)
-        reason = check_pose(stamp_ns, msg.header.frame_id, position, (q.x, q.y, q.z, q.w),
-                            self._last_stamp_ns, self._expected_frame, self._quat_tol)
-        if reason == 'stamp_backwards' and self._restarted(stamp_ns):
-            reason = None
-        if reason is not None:
-            self.drop_counts[reason] += 1
-            if time.monotonic() >= self._next_drop_log:
-                self._log_drop(f'wrist pose dropped ({reason}, frame {msg.header.frame_id!r}, '
-                               f'stamp {stamp.sec}.{stamp.nanosec:09d})')
-            return
-        self._backwards = 0
-        if self._t_ref_ns is None:
-            self._t_ref_ns = stamp_ns
-        self._last_stamp_ns = stamp_ns
-        now_ns = self.get_clock().now().nanoseconds
-        # Zero: sim time whose /clock has not started yet; no basis to judge silences on.
-        self._last_arrival_ns = now_ns if now_ns > 0 else None
-        self.accepted += 1
-        t = (stamp_ns - self._t_ref_ns) * 1e-9
-        xyz = self.transform.apply(*position)
-        out = PointStamped()
-        out.header.stamp = stamp
-        out.header.frame_id = self._base_frame
-        out.point.x, out.point.y, out.point.z = xyz
-        self._obs_pub.publish(out)
-        self.published['observations'] += 1
-        self._publish_events(self.segmenter.update(t, xyz))
-
-    def _restarted(self, stamp_ns: int) -> bool:
-        """Count a pose older than the last accepted one; True once the stream restarted."""
-        if self._restart_after <= 0:
-            return False
-        self._backwards += 1
-        if self._backwards < self._restart_after:
-            return False
-        self.get_logger().warning(
-            f'{self._backwards} consecutive wrist poses older than the last accepted one: '
-            f'taking the stream as restarted')
-        last_t = self.segmenter.last_time
-        if self.moving and last_t is not None:
-            self._publish_events([Event('end', last_t)])
-        self.segmenter.reset()
-        self.moving = False
-        self._t_ref_ns = None
-        self._last_stamp_ns = None
-        self._last_arrival_ns = None
-        self._backwards = 0
-        self.stream_restarts += 1
-        return True
+                                    throttle_duration_sec=self.params.log_throttle_sec)
 
     def _publish_events(self, events) -> None:
-        for ev in events:
-            self._event_pub.publish(Header(frame_id=ev.kind, stamp=self._to_stamp(ev.time)))
-            self.published[ev.kind] += 1
-            if ev.kind in ('onset', 'end'):
-                self.moving = ev.kind == 'onset'
-
-    def _to_stamp(self, t: float) -> Time:
-        sec, nanosec = ns_to_parts(self._t_ref_ns + round(t * 1e9))
-        return Time(sec=sec, nanosec=nanosec)
+        for kind, stamp_ns in events:
+            sec, nanosec = ns_to_parts(stamp_ns)
+            self._event_pub.publish(Header(frame_id=kind, stamp=Time(sec=sec, nanosec=nanosec)))
 
     def _log_drop(self, text: str) -> None:
+        # A logger call costs ~0.4 ms even when throttled: decide here first.
         now = time.monotonic()
-        if now < self._next_drop_log:  # a logger call costs ~0.4 ms even when throttled
+        if now < self._next_drop_log:
             return
-        self._next_drop_log = now + self._throttle
+        self._next_drop_log = now + self.params.log_throttle_sec
         drops = {k: v for k, v in self.drop_counts.items() if v}
-        self.get_logger().warning(f'{text}; drops so far: {drops}',
-                                  throttle_duration_sec=self._throttle)
+        self.get_logger().warning(f'{text}; drops so far: {drops}')
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = ObserverNode()
-        spin_until_shutdown(node)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    return run_node(ObserverNode, args)
 
 
 if __name__ == '__main__':
-    main()
+    raise SystemExit(main())

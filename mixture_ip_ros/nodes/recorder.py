@@ -4,42 +4,48 @@ Not an executable: the demo and the integration tests spin it beside the real no
 watches every JointTrajectory command and counts the non-finite ones (there must be none).
 """
 
+from dataclasses import dataclass
 import math
 import threading
 
 import numpy as np
 from geometry_msgs.msg import PointStamped
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Header
 from trajectory_msgs.msg import JointTrajectory
 
+from mixture_ip_ros.core.stamps import stamp_to_ns
+from mixture_ip_ros.nodes import qos
+from mixture_ip_ros.nodes.params import declare, param
+
 
 def _sec(stamp) -> float:
-    return stamp.sec + stamp.nanosec * 1e-9
+    return stamp_to_ns(stamp) * 1e-9
+
+
+@dataclass
+class RecorderParameters:
+    joint_state_topic: str = param('/joint_states', 'sensor_msgs/JointState of the robot')
+    observation_topic: str = param('/observer/wrist', "the observer's wrist observations")
+    event_topic: str = param('/observer/event', "the observer's events")
+    posterior_topic: str = param('/estimator/posterior', "the estimator's posterior summary")
+    trajectory_topic: str = param('/iiwa/joint_trajectory', 'the commands to the robot')
 
 
 class InteractionRecorder(Node):
 
     def __init__(self, **kwargs):
         super().__init__('recorder', **kwargs)
-        self.declare_parameter('joint_state_topic', '/joint_states')
-        self.declare_parameter('observation_topic', '/observer/wrist')
-        self.declare_parameter('event_topic', '/observer/event')
-        self.declare_parameter('posterior_topic', '/estimator/posterior')
-        self.declare_parameter('trajectory_topic', '/iiwa/joint_trajectory')
-        qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-        p = self.get_parameter
+        p = declare(self, RecorderParameters)
+        depth = qos.reliable(1000)
         self._lock = threading.Lock()
         self.clear()
-        self.create_subscription(JointState, p('joint_state_topic').value, self._on_joints, qos)
-        self.create_subscription(PointStamped, p('observation_topic').value, self._on_wrist, qos)
-        self.create_subscription(Header, p('event_topic').value, self._on_event, qos)
-        self.create_subscription(Float64MultiArray, p('posterior_topic').value,
-                                 self._on_posterior, qos)
-        self.create_subscription(JointTrajectory, p('trajectory_topic').value,
-                                 self._on_trajectory, qos)
+        self.create_subscription(JointState, p.joint_state_topic, self._on_joints, depth)
+        self.create_subscription(PointStamped, p.observation_topic, self._on_wrist, depth)
+        self.create_subscription(Header, p.event_topic, self._on_event, depth)
+        self.create_subscription(Float64MultiArray, p.posterior_topic, self._on_posterior, depth)
+        self.create_subscription(JointTrajectory, p.trajectory_topic, self._on_trajectory, depth)
 
     def clear(self):
         with self._lock:

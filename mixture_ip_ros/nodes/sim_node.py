@@ -1,126 +1,97 @@
-"""sim_node: the MuJoCo iiwa 14 with computed-torque control, as a ROS 2 node.
+"""sim_node: the MuJoCo iiwa 14 with computed-torque control, as a managed node.
 
-Subscribes iiwa/joint_trajectory (trajectory_msgs/JointTrajectory, reliable); publishes
-joint_states (sensor_msgs/JointState), iiwa/flange_pose (geometry_msgs/PoseStamped) and, in
-simulated-time mode, /clock (rosgraph_msgs/Clock), all at publish_rate Hz of simulated time.
+Subscribes  iiwa/joint_trajectory (trajectory_msgs/JointTrajectory, reliable) while active
+Publishes   joint_states (sensor_msgs/JointState), iiwa/flange_pose (geometry_msgs/PoseStamped)
+            and, in simulated-time mode, /clock (rosgraph_msgs/Clock), all at publish_rate Hz of
+            simulated time
+
+Lifecycle, as a robot with its joint_trajectory_controller: configure builds the scene and
+starts the physics (the arm holds its start posture, state and clock are published); activate
+accepts trajectories; deactivate drops the trajectory in progress at once and holds the present
+position (the physics and the clock go on: the arm does not fall); cleanup stops the simulation.
+An empty trajectory (no points) also stops the motion and holds, as on
+joint_trajectory_controller's topic interface.
 
 Time: with simulated_time true, ROS time is the simulation time, published on /clock; other nodes
 run with use_sim_time. Each timer callback advances periods_per_callback publish periods
 (publishing after each), as fast as possible (real_time_factor 0) or paced to real_time_factor.
 Trajectories are applied between callbacks, on a fixed grid of simulated time, so a run is
-deterministic given the callback at which each command arrived.
-With simulated_time false, the simulation follows the wall clock and messages carry ROS time.
-The node's own timers always run on the steady clock, so it never waits on the clock it publishes.
+deterministic given the callback at which each command arrived. With simulated_time false, the
+simulation follows the wall clock and messages carry ROS time. The node's own timers always run
+on the steady clock, so it never waits on the clock it publishes.
 """
 
-import math
+from dataclasses import dataclass
 
-import numpy as np
-import rclpy
-from builtin_interfaces.msg import Time as TimeMsg
 from geometry_msgs.msg import PoseStamped
+import numpy as np
 from rclpy.clock import Clock, ClockType
-from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
+from builtin_interfaces.msg import Time
 from trajectory_msgs.msg import JointTrajectory
 
+from mixture_ip_ros.core.stamps import ns_to_parts, seconds_to_ns, stamp_to_ns
+from mixture_ip_ros.nodes import qos
+from mixture_ip_ros.nodes.managed import ManagedNode, run_node
+from mixture_ip_ros.nodes.params import finite_list, param, positive
 from mixture_ip_ros.robot.controller import DEFAULT_NATURAL_FREQUENCY
+from mixture_ip_ros.robot.description import BASE_FRAME
 from mixture_ip_ros.robot.sim import HOME, IiwaSimulation
 from mixture_ip_ros.robot.trajectory import TrajectoryPoint
-from mixture_ip_ros.nodes.spinning import spin_until_shutdown
 
 
-def _time_msg(seconds: float) -> TimeMsg:
-    nanoseconds = int(round(seconds * 1e9))
-    return TimeMsg(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
+@dataclass
+class SimParameters:
+    autostart: bool = param(True, 'configure and activate at start-up; false: wait for '
+                                  'lifecycle transitions')
+    simulated_time: bool = param(True, 'true: ROS time is the simulation time, published on '
+                                       '/clock (other nodes: use_sim_time); false: the '
+                                       'simulation follows the wall clock')
+    real_time_factor: float = param(1.0, 'simulated-time mode: simulated s per wall s; 0 = as '
+                                         'fast as the machine allows', low=0.0, high=1000.0)
+    publish_rate: float = param(100.0, 'Hz of simulated time for joint_states, '
+                                       'iiwa/flange_pose and /clock (a whole number of 1 ms '
+                                       'control steps)', low=0.01, high=1000.0)
+    periods_per_callback: int = param(1, 'simulated-time mode: publish periods per timer '
+                                         'callback (more: less overhead, but in-process '
+                                         'subscribers may miss JointStates)', low=1,
+                                      high=10_000)
+    initial_positions: list = param(HOME.tolist(), 'start configuration (rad), iiwa_joint_1 .. '
+                                                   'iiwa_joint_7', check=finite_list(7),
+                                    rule='7 finite numbers')
+    natural_frequency: list = param([DEFAULT_NATURAL_FREQUENCY] * 7,
+                                    'computed-torque gains per joint: Kp = w^2 (rad/s)',
+                                    check=finite_list(7, positive_values=True),
+                                    rule='7 positive numbers')
+    damping_ratio: list = param([1.0] * 7, 'Kd = 2 zeta w per joint (1 = critically damped)',
+                                check=finite_list(7, positive_values=True),
+                                rule='7 positive numbers')
+    controller_mass_scale: float = param(1.0, "scales every link mass and inertia of the "
+                                              "controller's model (1 = the true model)",
+                                         low=0.0, high=100.0, check=positive, rule='> 0')
+    allow_partial_joints_goal: bool = param(False, 'as joint_trajectory_controller')
+    allow_nonzero_velocity_at_trajectory_end: bool = param(False,
+                                                           'as joint_trajectory_controller')
+    open_loop_control: bool = param(False, 'true: a new trajectory is blended from the last '
+                                           'reference; false: from the measured state')
+    pole: bool = param(False, 'the pole of the pole-pointing scenario in the scene')
+    stands: bool = param(True, 'the plate and screw stands of box assembly in the scene')
+    base_frame: str = param(BASE_FRAME, 'frame of iiwa/flange_pose')
+    max_catch_up: float = param(0.1, 'wall-clock mode: the largest backlog (s) caught up on '
+                                     'in one go', low=0.0, high=10.0)
 
 
-def _seconds(stamp) -> float:
-    return stamp.sec + stamp.nanosec * 1e-9
+class SimNode(ManagedNode):
 
-
-class SimNode(Node):
+    NODE_NAME = 'sim_node'
+    SCHEMA = SimParameters
 
     def __init__(self, **kwargs):
-        super().__init__('sim_node', **kwargs)
-        self.declare_parameter('simulated_time', True)
-        self.declare_parameter('real_time_factor', 1.0)
-        self.declare_parameter('publish_rate', 100.0)
-        self.declare_parameter('periods_per_callback', 1)
-        self.declare_parameter('initial_positions', HOME.tolist())
-        self.declare_parameter('natural_frequency', [DEFAULT_NATURAL_FREQUENCY] * 7)
-        self.declare_parameter('damping_ratio', [1.0] * 7)
-        self.declare_parameter('controller_mass_scale', 1.0)
-        self.declare_parameter('allow_partial_joints_goal', False)
-        self.declare_parameter('allow_nonzero_velocity_at_trajectory_end', False)
-        self.declare_parameter('open_loop_control', False)
-        self.declare_parameter('pole', False)
-        self.declare_parameter('stands', True)
-        self.declare_parameter('base_frame', 'iiwa_link_0')
-        self.declare_parameter('max_catch_up', 0.1)
-
-        param = self.get_parameter
-        self.simulated_time = bool(param('simulated_time').value)
-        self.real_time_factor = float(param('real_time_factor').value)
-        rate = float(param('publish_rate').value)
-        if not (math.isfinite(rate) and rate > 0):
-            raise ValueError(f'publish_rate must be positive, got {rate}')
-        if not (math.isfinite(self.real_time_factor) and self.real_time_factor >= 0):
-            raise ValueError(f'real_time_factor must be >= 0, got {self.real_time_factor}')
-        self.base_frame = str(param('base_frame').value)
-        self.periods_per_callback = int(param('periods_per_callback').value)
-        if self.periods_per_callback < 1:
-            raise ValueError('periods_per_callback must be >= 1')
-        self.max_catch_up = float(param('max_catch_up').value)
-
-        self.sim = IiwaSimulation(
-            q0=np.asarray(param('initial_positions').value, dtype=float),
-            pole=bool(param('pole').value), stands=bool(param('stands').value),
-            natural_frequency=np.asarray(param('natural_frequency').value, dtype=float),
-            damping_ratio=np.asarray(param('damping_ratio').value, dtype=float),
-            controller_mass_scale=float(param('controller_mass_scale').value),
-            allow_partial_joints_goal=bool(param('allow_partial_joints_goal').value),
-            allow_nonzero_velocity_at_trajectory_end=bool(
-                param('allow_nonzero_velocity_at_trajectory_end').value),
-            open_loop_control=bool(param('open_loop_control').value),
-            logger=self.get_logger().warning)
-        self.steps_per_publish = max(1, int(round(1.0 / (rate * self.sim.dt))))
-        self.publish_period = self.steps_per_publish * self.sim.dt
-
-        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
-                              history=HistoryPolicy.KEEP_LAST)
-        self.joint_state_pub = self.create_publisher(JointState, 'joint_states', reliable)
-        self.flange_pub = self.create_publisher(PoseStamped, 'iiwa/flange_pose', reliable)
-        self.clock_pub = None
-        if self.simulated_time:
-            self.clock_pub = self.create_publisher(
-                ClockMsg, '/clock', QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE))
-        self.trajectory_sub = self.create_subscription(
-            JointTrajectory, 'iiwa/joint_trajectory', self._on_trajectory, reliable)
-
-        self._clock_msg = ClockMsg()
-        self._joint_state_msg = JointState(name=list(self.sim.joint_names))
-        self._pose_msg = PoseStamped()
-        self._pose_msg.header.frame_id = self.base_frame
-
-        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self._wall_start = self._steady.now()
-        self._sim_start = self.sim.time
-        if self.simulated_time:
-            chunk = self.periods_per_callback * self.publish_period
-            period = 0.0 if self.real_time_factor == 0 else chunk / self.real_time_factor
-        else:
-            period = self.publish_period
-        self.timer = self.create_timer(period, self._on_timer, clock=self._steady)
-        self._publish()
-        if self.simulated_time:
-            pace = f'simulated time, real-time factor {self.real_time_factor or "unlimited"}'
-        else:
-            pace = 'wall-clock time'
-        self.get_logger().info(f'iiwa sim: dt {self.sim.dt * 1e3:.1f} ms, publishing every '
-                               f'{self.publish_period * 1e3:.0f} ms of {pace}')
+        super().__init__(self.NODE_NAME, **kwargs)
+        self.sim = None
+        self.trajectory_sub = None
+        self._timer = None
 
     @property
     def rejection_count(self) -> int:
@@ -130,26 +101,86 @@ class SimNode(Node):
     def last_rejection(self):
         return self.sim.last_rejection
 
-    # ------------------------------------------------------------------ time
-    def _ros_now(self) -> float:
-        """Current ROS time in seconds, the clock trajectory stamps refer to."""
-        if self.simulated_time:
-            return self.sim.time
-        return self.get_clock().now().nanoseconds * 1e-9
+    # -- lifecycle ----------------------------------------------------------------------
+    def configure(self) -> None:
+        p = self.params
+        self.sim = IiwaSimulation(
+            q0=np.asarray(p.initial_positions), pole=p.pole, stands=p.stands,
+            natural_frequency=np.asarray(p.natural_frequency),
+            damping_ratio=np.asarray(p.damping_ratio),
+            controller_mass_scale=p.controller_mass_scale,
+            allow_partial_joints_goal=p.allow_partial_joints_goal,
+            allow_nonzero_velocity_at_trajectory_end=p.allow_nonzero_velocity_at_trajectory_end,
+            open_loop_control=p.open_loop_control, logger=self.get_logger().warning)
+        self.steps_per_publish = max(1, int(round(1.0 / (p.publish_rate * self.sim.dt))))
+        self.publish_period = self.steps_per_publish * self.sim.dt
+        state = qos.reliable(10)
+        self.joint_state_pub = self.create_publisher(JointState, 'joint_states', state)
+        self.flange_pub = self.create_publisher(PoseStamped, 'iiwa/flange_pose', state)
+        # Reliable: a recorder's reliable subscription matches too (rclpy's TimeSource
+        # subscribes best effort, which a reliable publisher also serves).
+        self.clock_pub = (self.create_publisher(ClockMsg, '/clock', qos.reliable(1))
+                          if p.simulated_time else None)
+        self._clock_msg = ClockMsg()
+        self._joint_state_msg = JointState(name=list(self.sim.joint_names))
+        self._pose_msg = PoseStamped()
+        self._pose_msg.header.frame_id = p.base_frame
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._wall_start = self._steady.now()
+        self._sim_start = self.sim.time
+        if p.simulated_time:
+            chunk = p.periods_per_callback * self.publish_period
+            period = 0.0 if p.real_time_factor == 0 else chunk / p.real_time_factor
+        else:
+            period = self.publish_period
+        self._timer = self.create_timer(period, self._on_timer, clock=self._steady)
+        self._publish()
+        pace = (f'simulated time, real-time factor {p.real_time_factor or "unlimited"}'
+                if p.simulated_time else 'wall-clock time')
+        self.get_logger().info(f'iiwa sim: dt {self.sim.dt * 1e3:.1f} ms, publishing every '
+                               f'{self.publish_period * 1e3:.0f} ms of {pace}')
 
-    def _stamp(self) -> TimeMsg:
-        if self.simulated_time:
-            return _time_msg(self.sim.time)
-        return self.get_clock().now().to_msg()
+    def activate(self) -> None:
+        self.trajectory_sub = self.create_subscription(
+            JointTrajectory, 'iiwa/joint_trajectory', self._on_trajectory, qos.reliable(10))
 
-    # ------------------------------------------------------------------ callbacks
+    def deactivate(self) -> None:
+        if self.trajectory_sub is not None:
+            self.destroy_subscription(self.trajectory_sub)
+            self.trajectory_sub = None
+        if self.sim is not None:
+            self.sim.cancel_trajectory()
+
+    def cleanup(self) -> None:
+        if self._timer is not None:
+            self.destroy_timer(self._timer)
+        for pub in (getattr(self, 'joint_state_pub', None), getattr(self, 'flange_pub', None),
+                    getattr(self, 'clock_pub', None)):
+            if pub is not None:
+                self.destroy_publisher(pub)
+        self._timer = self.joint_state_pub = self.flange_pub = self.clock_pub = None
+        self.sim = None
+
+    # -- time ---------------------------------------------------------------------------
+    def _ros_now_ns(self) -> int:
+        """Current ROS time, the clock trajectory stamps refer to."""
+        if self.params.simulated_time:
+            return seconds_to_ns(self.sim.time)
+        return self.get_clock().now().nanoseconds
+
+    # -- callbacks ----------------------------------------------------------------------
     def _on_trajectory(self, msg: JointTrajectory) -> None:
         try:
-            points = [TrajectoryPoint(_seconds(p.time_from_start), p.positions, p.velocities,
-                                      p.accelerations) for p in msg.points]
-            stamp = _seconds(msg.header.stamp)
-            # header.stamp 0 means "start now"; otherwise map ROS time onto the simulation clock.
-            start = None if stamp == 0.0 else self.sim.time + (stamp - self._ros_now())
+            if not msg.points:
+                self.sim.cancel_trajectory()
+                self.get_logger().info('empty trajectory: stopping and holding the position')
+                return
+            points = [TrajectoryPoint(stamp_to_ns(p.time_from_start) * 1e-9, p.positions,
+                                      p.velocities, p.accelerations) for p in msg.points]
+            stamp_ns = stamp_to_ns(msg.header.stamp)
+            # A zero stamp means "start now"; otherwise map ROS time onto the simulation clock.
+            start = (None if stamp_ns == 0
+                     else self.sim.time + (stamp_ns - self._ros_now_ns()) * 1e-9)
             self.sim.set_trajectory(list(msg.joint_names), points, start)
         except Exception as error:  # a bad message must never kill the node
             self.sim.rejection_count += 1
@@ -157,19 +188,19 @@ class SimNode(Node):
             self.get_logger().error(self.sim.last_rejection)
 
     def _on_timer(self) -> None:
-        if self.simulated_time:
-            for _ in range(self.periods_per_callback):
+        p = self.params
+        if p.simulated_time:
+            for _ in range(p.periods_per_callback):
                 self.sim.step(self.steps_per_publish)
                 self._publish()
             return
         # Wall-clock mode: catch up with the elapsed time, in publish periods.
         elapsed = (self._steady.now() - self._wall_start).nanoseconds * 1e-9
-        target = self._sim_start + elapsed
-        behind = target - self.sim.time
-        if behind > self.max_catch_up:
+        behind = self._sim_start + elapsed - self.sim.time
+        if behind > p.max_catch_up:
             # Too slow to keep up: drop the backlog rather than spiral.
-            self._sim_start += behind - self.max_catch_up
-            behind = self.max_catch_up
+            self._sim_start += behind - p.max_catch_up
+            behind = p.max_catch_up
         while behind >= self.publish_period:
             self.sim.step(self.steps_per_publish)
             behind -= self.publish_period
@@ -177,10 +208,13 @@ class SimNode(Node):
 
     def _publish(self) -> None:
         # Messages are reused: publish() serialises them at once.
-        stamp = self._stamp()
-        if self.clock_pub is not None:
+        if self.params.simulated_time:
+            sec, nanosec = ns_to_parts(seconds_to_ns(self.sim.time))
+            stamp = Time(sec=sec, nanosec=nanosec)
             self._clock_msg.clock = stamp
             self.clock_pub.publish(self._clock_msg)
+        else:
+            stamp = self.get_clock().now().to_msg()
         data = self.sim.data
         js = self._joint_state_msg
         js.header.stamp = stamp
@@ -198,18 +232,8 @@ class SimNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = SimNode()
-        spin_until_shutdown(node)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    return run_node(SimNode, args)
 
 
 if __name__ == '__main__':
-    main()
+    raise SystemExit(main())

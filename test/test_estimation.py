@@ -1,14 +1,18 @@
-"""Estimator planning without ROS: plans against the OnlineEstimator's own prediction, commit
-rule, interaction bookkeeping and rejection of bad input."""
+"""The estimator's logic without ROS (estimation/): plans against the OnlineEstimator's own
+prediction, the commit rule, the replan schedule on an injected clock, held samples, interaction
+records and rejection of bad input."""
 
 import numpy as np
 import pytest
 
 from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.io.model_file import load_model
-from mixture_ip_ros.estimation.planning import (
-    InteractionPlanner, LatencyStats, Plan, build_plan, check_plan, posterior_summary,
-    predicted_wrist, should_commit, summary_labels)
+from mixture_ip_ros.estimation.held import HeldSamples
+from mixture_ip_ros.estimation.planner import OnlinePlanner, PlannerSettings, should_commit
+from mixture_ip_ros.estimation.plans import (Plan, PosteriorSummary, build_plan, check_plan,
+                                             posterior_summary, predicted_wrist)
+from mixture_ip_ros.estimation.records import LatencyStats
+from mixture_ip_ros.estimation.schedule import ReplanSchedule
 from mixture_ip_ros.app.training import train_to_file
 
 from mixture_ip_ros.scenarios.synthetic import mixture_demos
@@ -148,8 +152,10 @@ def test_posterior_summary_layout(trained):
     s = posterior_summary(est, 0.5)
     k, alpha = est.map_hypothesis()
     p = est.component_posterior()
-    assert summary_labels(3) == ['p0', 'p1', 'p2', 'alpha', 'phase', 'confidence', 'component']
-    assert np.allclose(s, list(p) + [alpha, min(alpha * 0.5, 1.0), p[k], k])
+    assert PosteriorSummary.labels(3) == ['p0', 'p1', 'p2', 'alpha', 'phase', 'confidence',
+                                          'component']
+    assert np.allclose(s.as_array(), list(p) + [alpha, min(alpha * 0.5, 1.0), p[k], k])
+    assert (s.component, s.confidence) == (k, p[k])
 
 
 def test_commit_rule():
@@ -158,10 +164,11 @@ def test_commit_rule():
     assert should_commit([0.1, 0.9], 3, 0.9, 3)
 
 
-def _planner(model, meta, **kw):
+def _planner(model, meta, labels=True, **settings):
     est = OnlineEstimator(model)
-    kw.setdefault('labels', meta['component_labels'])
-    return InteractionPlanner(est, **kw), OnlineEstimator(model)
+    return (OnlinePlanner(est, PlannerSettings(**settings),
+                          labels=meta['component_labels'] if labels else None),
+            OnlineEstimator(model))
 
 
 @pytest.mark.parametrize('which, threshold, min_obs, gate', [
@@ -179,10 +186,10 @@ def test_interaction_commits_when_the_oracle_passes_the_threshold(request, which
     planner.onset(onset)
     expected = None
     for t, y in zip(demo.t, demo.observed):
-        result = planner.observe(onset + _ns(t), y)
+        result = planner.observe(onset + _ns(t), y)[0]
         used = oracle.update(_t(t), y)
         assert result == ('used' if used else 'skipped')
-        step = planner.step()
+        step = planner.replan()
         if expected is None and should_commit(oracle.component_posterior(),
                                               oracle.n_observations, threshold, min_obs):
             expected = (oracle.phase(_t(t)), oracle.n_observations, oracle.map_hypothesis()[0],
@@ -198,27 +205,27 @@ def test_interaction_commits_when_the_oracle_passes_the_threshold(request, which
     else:
         assert expected[1] == min_obs
     rec = planner.current
-    assert rec['commit_phase'] == pytest.approx(expected[0], abs=1e-12)
-    assert 0 < rec['commit_phase'] < 1
-    assert rec['commit_observations'] == expected[1]
-    assert rec['commit_component'] == expected[2]
-    assert rec['commit_elapsed'] == expected[3]
-    assert rec['commit_time'] == pytest.approx(onset * 1e-9 + expected[3], abs=1e-6)
-    assert rec['onset_time'] == onset * 1e-9
+    assert rec.commit_phase == pytest.approx(expected[0], abs=1e-12)
+    assert 0 < rec.commit_phase < 1
+    assert rec.commit_observations == expected[1]
+    assert rec.commit_component == expected[2]
+    assert rec.commit_elapsed == expected[3]
+    assert rec.commit_time == pytest.approx(onset * 1e-9 + expected[3], abs=1e-6)
+    assert rec.onset_time == onset * 1e-9
     # the pattern is recognised: the chosen component's label is the demonstration's
-    assert rec['label'] == demo.label
-    assert rec['n_observations'] == oracle.n_observations
+    assert rec.label == demo.label
+    assert rec.n_observations == oracle.n_observations
     final = planner.end(onset + _ns(demo.t[-1]))
-    assert final.send and planner.state == 'done' and rec['end_reason'] == 'end'
-    assert rec['end_elapsed'] == _t(demo.t[-1])
-    assert rec['end_time'] == pytest.approx((onset + _ns(demo.t[-1])) * 1e-9, abs=1e-6)
-    assert (rec['final_component'], rec['final_label']) == (oracle.map_hypothesis()[0],
+    assert final.send and planner.state == 'done' and rec.end_reason == 'end'
+    assert rec.end_elapsed == _t(demo.t[-1])
+    assert rec.end_time == pytest.approx((onset + _ns(demo.t[-1])) * 1e-9, abs=1e-6)
+    assert (rec.final_component, rec.final_label) == (oracle.map_hypothesis()[0],
                                                             demo.label)
     # the end posture: eq. 13 conditioned on the final wrist position at z = 1
     assert np.allclose(final.plan.positions[-1],
                        oracle.predict_at_rest(demo.observed[-1])[0], atol=1e-12)
     assert len(final.plan.times) == 1
-    assert planner.step() is None                     # nothing after the end
+    assert planner.replan() is None                     # nothing after the end
 
 
 def test_end_without_commit_sends_nothing(noisy):
@@ -226,21 +233,21 @@ def test_end_without_commit_sends_nothing(noisy):
     planner, _ = _planner(model, meta, confidence_threshold=0.999)
     planner.onset(0)
     for t, y in zip(held[0].t[:6], held[0].observed[:6]):
-        planner.observe(_ns(t), y)
+        planner.observe(_ns(t), y)[0]
     step = planner.end(_ns(held[0].t[5]))
-    assert not step.send and planner.current['commit_phase'] is None
-    assert planner.plans_sent == 0 and planner.state == 'done'
+    assert not step.send and planner.current.commit_phase is None
+    assert planner.counts.plans_sent == 0 and planner.state == 'done'
 
 
 def test_planner_steps_only_when_something_is_new(trained):
     model, meta, held = trained
     planner, _ = _planner(model, meta)
-    assert planner.step() is None                          # idle
+    assert planner.replan() is None                          # idle
     planner.onset(0)
-    assert planner.step() is not None                      # the prior, after the onset
-    assert planner.step() is None
-    planner.observe(_ns(0.1), held[0].observed[10])
-    assert planner.step() is not None
+    assert planner.replan() is not None                      # the prior, after the onset
+    assert planner.replan() is None
+    planner.observe(_ns(0.1), held[0].observed[10])[0]
+    assert planner.replan() is not None
 
 
 def test_switching_component_mid_way_is_recorded(trained):
@@ -252,20 +259,20 @@ def test_switching_component_mid_way_is_recorded(trained):
     ks = []
     for t, y in [(t, y) for t, y in zip(a.t, a.observed) if t <= 0.1] + \
                 [(t, y) for t, y in zip(b.t, b.observed) if t > 0.1]:
-        planner.observe(_ns(t), y)
+        planner.observe(_ns(t), y)[0]
         oracle.update(_t(t), y)
-        step = planner.step()
+        step = planner.replan()
         if step is not None and step.send:
             ks.append(oracle.map_hypothesis()[0])
             assert step.plan.component == ks[-1]
             assert step.switched_from == (ks[-2] if len(ks) > 1 and ks[-2] != ks[-1] else None)
     expected = [{'from': p, 'to': n} for p, n in zip(ks, ks[1:]) if p != n]
     assert expected, 'the scenario should switch at least once'
-    assert [{'from': s['from'], 'to': s['to']} for s in planner.current['switches']] == expected
-    assert planner.current['label'] == b.label
-    assert planner.current['commit_component'] == ks[0] != planner.current['component']
+    assert [{'from': s.from_component, 'to': s.to_component} for s in planner.current.switches] == expected
+    assert planner.current.label == b.label
+    assert planner.current.commit_component == ks[0] != planner.current.component
     planner.end(_ns(b.t[-1]))
-    assert planner.current['final_component'] == ks[-1]
+    assert planner.current.final_component == ks[-1]
 
 
 def test_bad_input_is_counted_and_estimation_goes_on(trained):
@@ -274,51 +281,51 @@ def test_bad_input_is_counted_and_estimation_goes_on(trained):
     planner, oracle = _planner(model, meta)
     onset = 5_000_000_000
     # before any onset: held, then dropped when the onset turns out to be later
-    assert planner.observe(onset - _ns(0.5), demo.observed[0]) == 'held'
+    assert planner.observe(onset - _ns(0.5), demo.observed[0])[0] == 'held'
     # arrives before its onset event but is stamped after it: taken at the onset
-    assert planner.observe(onset + _ns(demo.t[0]), demo.observed[0]) == 'held'
-    planner.onset(onset)
-    assert planner.n_backlog == 1 and planner.absorb_backlog(1.0) == 1
+    assert planner.observe(onset + _ns(demo.t[0]), demo.observed[0])[0] == 'held'
+    assert planner.onset(onset)                            # absorbed at once: replan due
+    assert planner.n_backlog == 0 and planner.estimator.n_observations == 1
     oracle.update(_t(demo.t[0]), demo.observed[0])
-    assert planner.current['n_observations'] == 1
-    assert planner.observe(onset - 1, demo.observed[1]) == 'before_onset'
-    assert planner.observe(onset + _ns(0.3), [np.nan, 0.0, 0.0]) == 'non_finite'
-    assert planner.observe(onset + _ns(0.3), [0.0, 0.0]) == 'non_finite'
+    assert planner.current.n_observations == 1
+    assert planner.observe(onset - 1, demo.observed[1])[0] == 'before_onset'
+    assert planner.observe(onset + _ns(0.3), [np.nan, 0.0, 0.0])[0] == 'non_finite'
+    assert planner.observe(onset + _ns(0.3), [0.0, 0.0])[0] == 'non_finite'
     for t, y in zip(demo.t[1:], demo.observed[1:]):
-        assert planner.observe(onset + _ns(t), y) in ('used', 'skipped')
+        assert planner.observe(onset + _ns(t), y)[0] in ('used', 'skipped')
         oracle.update(_t(t), y)
-    assert planner.observe(onset + _ns(demo.t[5]), demo.observed[5]) == 'time_backwards'
-    assert planner.observe(onset + _ns(demo.t[-1]), demo.observed[-1]) == 'time_backwards'
-    assert planner.rejected == {'wrong_frame': 0, 'non_finite': 2, 'before_onset': 1,
+    assert planner.observe(onset + _ns(demo.t[5]), demo.observed[5])[0] == 'time_backwards'
+    assert planner.observe(onset + _ns(demo.t[-1]), demo.observed[-1])[0] == 'time_backwards'
+    assert planner.counts.rejected == {'wrong_frame': 0, 'non_finite': 2, 'before_onset': 1,
                                 'time_backwards': 2, 'exception': 0, 'bad_joint_state': 0}
-    assert planner.current['n_rejected'] == 5
-    step = planner.step()
+    assert planner.current.n_rejected == 5
+    step = planner.replan()
     assert step.send
     assert np.allclose(step.plan.positions, oracle.predict(step.plan.phases)['controlled']
                        ['position'], atol=1e-12)
     planner.end(onset + _ns(demo.t[-1]))
     # after the end: held for a possible next onset, never fed to the finished interaction
-    n = planner.current['n_observations']
-    assert planner.observe(onset + _ns(demo.t[-1] + 0.1), demo.observed[-1]) == 'held'
-    assert planner.current['n_observations'] == n and planner.n_held == 1
+    n = planner.current.n_observations
+    assert planner.observe(onset + _ns(demo.t[-1] + 0.1), demo.observed[-1])[0] == 'held'
+    assert planner.current.n_observations == n and planner.n_held == 1
 
 
 def test_held_observations_cover_the_hold_window(trained):
     model, meta, held = trained
     planner, _ = _planner(model, meta, hold_window=0.025)
-    results = [planner.observe(_ns(0.01 * i), held[0].observed[i]) for i in range(5)]
+    results = [planner.observe(_ns(0.01 * i), held[0].observed[i])[0] for i in range(5)]
     assert results == ['held'] * 5
     assert planner.n_held == 3                             # 0.02, 0.03, 0.04
     planner.onset(_ns(0.03))                               # takes 0.03 and 0.04
-    assert planner.current['n_received'] == 2 and planner.n_held == 0
-    assert sum(planner.rejected.values()) == 0
+    assert planner.current.n_received == 2 and planner.n_held == 0
+    assert planner.counts.n_rejected == 0
     planner.end(_ns(0.5))
     for i in range(3):
-        planner.observe(_ns(10.0 + 0.01 * i), held[0].observed[i])
+        planner.observe(_ns(10.0 + 0.01 * i), held[0].observed[i])[0]
     planner.observe(_ns(10.005), held[0].observed[1])      # the stamps' clock restarted
     assert planner.n_held == 1
     planner.onset(_ns(10.0))                               # nothing of the old clock mixed in
-    assert planner.n_backlog == 1 and planner.current['n_received'] == 1
+    assert planner.current.n_received == 1
 
 
 def test_backlog_absorbed_after_live_observations_gives_the_time_ordered_posterior(trained):
@@ -326,22 +333,24 @@ def test_backlog_absorbed_after_live_observations_gives_the_time_ordered_posteri
     the time-ordered one (the weights are static)."""
     model, meta, held = trained
     demo = held[1]
-    planner, oracle = _planner(model, meta, confidence_threshold=0.5, min_observations=1)
+    planner, oracle = _planner(model, meta, confidence_threshold=0.5, min_observations=1,
+                               backlog_slice=1)
     onset = 7_000_000_000
-    n_held = int(0.3 * len(demo.t))
+    n_held = int(0.6 * len(demo.t))
     for t, y in zip(demo.t[:n_held], demo.observed[:n_held]):
-        assert planner.observe(onset + _ns(t), y) == 'held'
-    planner.onset(onset)
+        assert planner.observe(onset + _ns(t), y)[0] == 'held'
+    planner.onset(onset)                                   # the first slice
     n_backlog = planner.n_backlog
-    assert n_backlog == planner.current['n_observations'] > 2
-    assert planner.estimator.n_observations == 0
-    live = [(t, y) for t, y in zip(demo.t[n_held:], demo.observed[n_held:])][:20]
+    assert n_backlog == planner.current.n_observations - 1 > 6
+    live = [(t, y) for t, y in zip(demo.t[n_held:], demo.observed[n_held:])][:5]
     for t, y in live:
         planner.observe(onset + _ns(t), y)
-    assert planner.estimator.n_observations > 0 and planner.n_backlog == n_backlog  # live first
-    assert planner.absorb_backlog(0.0) == 1                # at least one per call
+    # live ones at once, one slice of the backlog per call: most of it still waits
+    assert planner.n_backlog == n_backlog - 5
+    assert planner.estimator.n_observations == planner.current.n_observations - n_backlog + 5
+    assert not planner.replan().send                       # no commit before it is all in
     while planner.n_backlog:
-        planner.absorb_backlog(1e-4)
+        planner.tick()
     for t, y in zip(demo.t, demo.observed):
         if t <= live[-1][0]:
             oracle.update(_t(t), y)
@@ -349,7 +358,7 @@ def test_backlog_absorbed_after_live_observations_gives_the_time_ordered_posteri
     np.testing.assert_allclose(planner.estimator.log_evidence, oracle.log_evidence,
                                rtol=1e-9, atol=1e-8)
     np.testing.assert_allclose(planner.estimator.sigma, oracle.sigma, rtol=1e-8, atol=1e-12)
-    step = planner.step()
+    step = planner.replan()
     assert step.send and step.committed_now
     assert np.allclose(step.plan.positions, oracle.predict(step.plan.phases)['controlled']
                        ['position'], atol=1e-10)
@@ -360,10 +369,10 @@ def test_end_absorbs_what_is_left_of_the_backlog(trained):
     demo = held[0]
     planner, oracle = _planner(model, meta, confidence_threshold=0.5, min_observations=1)
     for t, y in zip(demo.t, demo.observed):
-        planner.observe(_ns(t), y)
+        planner.observe(_ns(t), y)[0]
         oracle.update(_t(t), y)
     planner.onset(0)
-    assert planner.n_backlog == oracle.n_observations
+    assert planner.n_backlog == oracle.n_observations - PlannerSettings().backlog_slice
     step = planner.end(_ns(demo.t[-1]))
     assert planner.n_backlog == 0 and step.send
     assert planner.estimator.n_observations == oracle.n_observations
@@ -373,9 +382,9 @@ def test_new_onset_closes_the_unfinished_interaction(trained):
     model, meta, held = trained
     planner, _ = _planner(model, meta)
     planner.onset(0)
-    planner.observe(_ns(0.1), held[0].observed[10])
+    planner.observe(_ns(0.1), held[0].observed[10])[0]
     planner.onset(_ns(2.0))
-    assert [r['end_reason'] for r in planner.interactions] == ['new_onset', None]
+    assert [r.end_reason for r in planner.interactions] == ['new_onset', None]
     assert planner.estimator.n_observations == 0 and planner.state == 'observing'
 
 
@@ -384,9 +393,16 @@ def test_invalid_settings_are_refused(trained):
     est = OnlineEstimator(model)
     for kw in ({'confidence_threshold': 0.0}, {'confidence_threshold': 1.5},
                {'min_observations': 0}, {'n_points': 1}, {'lookahead': -0.1},
-               {'settle_time': 0.0}, {'labels': ['a']}):
-        with pytest.raises(ValueError):
-            InteractionPlanner(est, **kw)
+               {'settle_time': 0.0}, {'backlog_slice': 0}, {'replan_period': 0.0},
+               {'hold_window': float('nan')}):
+        with pytest.raises(ValueError, match=next(iter(kw))):
+            PlannerSettings(**kw)
+    with pytest.raises(ValueError, match='1 component labels for 3'):
+        OnlinePlanner(est, labels=['a'])
+    planner = OnlinePlanner(est)
+    with pytest.raises(ValueError, match='confidence_threshold'):
+        planner.update_settings(confidence_threshold=2.0, n_points=9)
+    assert planner.settings == PlannerSettings()          # nothing changed
 
 
 def test_latency_stats():
@@ -427,8 +443,8 @@ def test_final_posture_time_does_not_recede_while_the_human_rests(trained):
     finals = []
     rest_t = demo.t[-1] + 0.01 * np.arange(1, 80)         # the human holds still 0.8 s
     for t, y in list(zip(demo.t, demo.observed)) + [(t, demo.observed[-1]) for t in rest_t]:
-        planner.observe(_ns(t), y)
-        step = planner.step()
+        planner.observe(_ns(t), y)[0]
+        step = planner.replan()
         if step is not None and step.send and step.plan.final:
             finals.append((_t(t), step.plan.times[0]))
     assert len(finals) > 10
@@ -446,13 +462,12 @@ def test_interaction_records_are_bounded(trained):
     planner, _ = _planner(model, meta, max_records=3)
     for i in range(5):
         planner.onset(_ns(10.0 * i))
-    assert [r['onset_stamp_ns'] for r in planner.interactions] == [_ns(20.0), _ns(30.0),
+    assert [r.onset_stamp_ns for r in planner.interactions] == [_ns(20.0), _ns(30.0),
                                                                    _ns(40.0)]
 
 
 def test_catch_up_drops_points_the_robot_cannot_reach_in_time(trained):
     """A robot far from the plan gets a later first point, reachable at catch_up_velocity."""
-    from mixture_ip_ros.estimation.planning import build_plan
     model, meta, demos = trained
     est = OnlineEstimator(model, n_alpha=10, min_interval=0.0)
     demo = demos[0]
@@ -482,8 +497,122 @@ def test_plan_starts_from_the_present_when_observations_lag(trained):
         onset = 5_000_000_000
         planner.onset(onset)
         for t, y in zip(demo.t[:60], demo.observed[:60]):
-            planner.observe(onset + _ns(t), y)
-        step = planner.step(clock_now=None if clock_now is None else demo.t[59] + clock_now)
+            planner.observe(onset + _ns(t), y)[0]
+        step = planner.replan(None if clock_now is None else onset + round((demo.t[59] + clock_now) * 1e9))
         results[clock_now] = step.plan.times[0]
     assert results[50.0] == pytest.approx(results[None])
     assert results[0.3] == pytest.approx(results[None] + 0.3, abs=1e-9)
+
+
+# -- the replan schedule on a fake clock ---------------------------------------------------
+
+def test_schedule_replans_once_per_period_of_stamps_and_clock():
+    s = ReplanSchedule(0.1)
+    ms = 1_000_000
+    assert s.due_on_observation(0.0, 0)                   # the first one replans
+    s.observation_replanned(0.0)
+    s.replanned(0)
+    assert not s.due_on_observation(0.05, 50 * ms)       # within the period
+    assert not s.due_on_timer(50 * ms)
+    assert not s.due_on_observation(0.1, 60 * ms)        # stamps due, clock not: fast replay
+    assert s.due_on_observation(0.1, 100 * ms)
+    s.observation_replanned(0.1)
+    s.replanned(100 * ms)
+    assert not s.due_on_timer(150 * ms) and s.due_on_timer(200 * ms)   # a pause: the timer
+    s.replanned(200 * ms)
+    assert not s.due_on_observation(0.25, 250 * ms)     # at most one replan per clock period
+    assert s.due_on_observation(0.3, 300 * ms)
+    assert s.due_on_timer(10 * ms)                       # the clock was reset: not stuck
+    s.restart()                                          # a new interaction: stamps from zero
+    assert s.due_on_observation(0.0, None)
+    s.on_observation = False
+    assert not s.due_on_observation(5.0, 10**12)
+    with pytest.raises(ValueError, match='positive'):
+        s.period = 0.0
+
+
+def test_planner_replans_on_the_schedule_and_stamps_steps_with_their_trigger(trained):
+    """Fed at 100 Hz with the clock following the stamps, replans come at 10 Hz; each step
+    carries the stamp of the latest observation it rests on."""
+    model, meta, held = trained
+    demo = held[1]
+    planner, _ = _planner(model, meta, replan_period=0.1)
+    onset = 3_000_000_000
+    planner.onset(onset)
+    steps = []
+    for t, y in zip(demo.t, demo.observed):
+        stamp = onset + _ns(t)
+        _, due = planner.observe(stamp, y, now_ns=stamp)
+        if due:
+            steps.append((stamp, planner.replan(stamp)))
+    assert len(steps) == pytest.approx(demo.duration / 0.1, abs=1.5)
+    assert all(step.trigger_ns == stamp for stamp, step in steps)
+    assert all(b - a >= _ns(0.1) for (a, _), (b, _) in zip(steps, steps[1:]))
+    final = planner.end(onset + _ns(demo.t[-1] + 0.2))
+    assert final.trigger_ns == onset + _ns(demo.t[-1] + 0.2)
+
+
+def test_deactivating_ends_the_interaction(trained):
+    model, meta, held = trained
+    planner, _ = _planner(model, meta)
+    planner.onset(0)
+    planner.observe(_ns(0.1), held[0].observed[10])
+    planner.deactivate()
+    assert planner.state == 'done' and planner.current.end_reason == 'deactivated'
+    assert planner.replan() is None
+    planner.deactivate()                                 # idempotent
+
+
+def test_held_samples_keep_the_window_and_restart_with_the_clock():
+    held = HeldSamples(0.1)
+    for i in range(20):
+        held.add(_ns(0.01 * i), i)
+    assert len(held) == 11                               # 0.09 .. 0.19 s
+    assert [y for _, y in held.take_from(_ns(0.15))] == [15, 16, 17, 18, 19]
+    assert len(held) == 0
+    held.add(_ns(5.0), 'a')
+    held.add(_ns(1.0), 'b')                              # older: another clock
+    assert [y for _, y in held.take_from(0)] == ['b']
+    with pytest.raises(ValueError, match='hold_window'):
+        HeldSamples(0.0)
+
+
+# -- the observer's logic -----------------------------------------------------------------
+
+def _observer(**kw):
+    from mixture_ip_ros.core.segmentation import MotionSegmenter
+    from mixture_ip_ros.estimation.observer import WristObserver
+    return WristObserver(MotionSegmenter(), expected_frame='world', **kw)
+
+
+def test_observer_reports_one_gap_per_silence_on_the_callers_clock():
+    obs = _observer()
+    q = (0.0, 0.0, 0.0, 1.0)
+    period = 10_000_000
+    for k in range(60):                                  # 0.6 s at rest, 100 Hz
+        out = obs.on_pose(k * period, 'world', (0.2, 0.1, 1.0), q, now_ns=k * period)
+        assert out.rejected is None and out.events == []
+    last = 59 * period
+    assert obs.on_timer(last + 5 * period) == []         # 50 ms: not yet a gap
+    assert obs.on_timer(last + 20 * period) == [('gap', last)]
+    assert obs.on_timer(last + 40 * period) == []        # the same silence: once
+    out = obs.on_pose(last + 50 * period, 'world', (0.2, 0.1, 1.0), q, now_ns=last + 50 * period)
+    assert out.events == []                              # not reported again on resumption
+    assert obs.counts.published == {'observations': 61, 'onset': 0, 'end': 0, 'gap': 1}
+
+
+def test_observer_drops_bad_poses_and_takes_a_replayed_stream_as_new():
+    obs = _observer(restart_after_backwards=3)
+    q = (0.0, 0.0, 0.0, 1.0)
+    for k in range(5):
+        assert obs.on_pose(10**9 + k, 'world', (0, 0, 1), q, now_ns=1).rejected is None
+    assert obs.on_pose(10**9 + 9, 'camera', (0, 0, 1), q, now_ns=1).rejected == 'wrong_frame'
+    assert obs.on_pose(10**9 + 9, 'world', (0, 0, 1), (0, 0, 0, 0), now_ns=1).rejected == \
+        'bad_quaternion'
+    assert obs.on_pose(10**9 + 4, 'world', (0, 0, 1), q, now_ns=1).rejected == 'duplicate_stamp'
+    assert [obs.on_pose(5, 'world', (0, 0, 1), q, now_ns=1).rejected,
+            obs.on_pose(6, 'world', (0, 0, 1), q, now_ns=1).rejected] == ['stamp_backwards'] * 2
+    out = obs.on_pose(7, 'world', (0, 0, 1), q, now_ns=1)      # the third: a new stream
+    assert out.rejected is None and out.restarted and obs.counts.stream_restarts == 1
+    assert obs.counts.dropped == {'non_finite': 0, 'bad_quaternion': 1, 'wrong_frame': 1,
+                                  'duplicate_stamp': 1, 'stamp_backwards': 2, 'exception': 0}

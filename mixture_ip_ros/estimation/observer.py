@@ -1,0 +1,123 @@
+"""What the observer node decides, without ROS: which mocap poses are usable, the wrist in the
+robot base frame, and the interaction's onset, end and gaps.
+
+Every pose that passes the checks (estimation.pose_check) is forwarded as it comes, before the
+events it settles (core.segmentation). The segmenter runs on the stamps' time (seconds since the
+first accepted pose); silences are judged on the caller's clock (``now_ns``, the node clock), since
+mocap and node clocks may be offset. A stream whose stamps keep going back
+(``restart_after_backwards`` in a row: a bag replayed again, a mocap clock reset) is a new stream.
+"""
+
+from dataclasses import dataclass, field
+from typing import List, Optional, Tuple
+
+from mixture_ip_ros.core.frames import FrameTransform
+from mixture_ip_ros.core.segmentation import Event, MotionSegmenter
+from mixture_ip_ros.estimation.pose_check import POSE_REJECT_REASONS, check_pose
+
+
+@dataclass
+class ObservedPose:
+    """What one pose produced: the reason it was dropped (None if accepted), the wrist in the
+    base frame (accepted poses), and the events it settles as (kind, stamp ns)."""
+
+    rejected: Optional[str] = None
+    point: Optional[Tuple[float, float, float]] = None
+    events: List[Tuple[str, int]] = field(default_factory=list)
+    restarted: bool = False
+
+
+@dataclass
+class ObserverCounts:
+    accepted: int = 0
+    dropped: dict = field(default_factory=lambda: dict.fromkeys(POSE_REJECT_REASONS, 0))
+    published: dict = field(default_factory=lambda: dict.fromkeys(
+        ('observations', 'onset', 'end', 'gap'), 0))
+    stream_restarts: int = 0
+
+
+class WristObserver:
+
+    def __init__(self, segmenter: MotionSegmenter, transform: FrameTransform = None, *,
+                 expected_frame: str = '', quaternion_tolerance: float = 0.01,
+                 restart_after_backwards: int = 50):
+        if not quaternion_tolerance >= 0:
+            raise ValueError(f'quaternion_tolerance must be >= 0, got {quaternion_tolerance}')
+        self.segmenter = segmenter
+        self.transform = transform if transform is not None else FrameTransform()
+        self.expected_frame = expected_frame
+        self.quaternion_tolerance = float(quaternion_tolerance)
+        self.restart_after = int(restart_after_backwards)
+        self.counts = ObserverCounts()
+        self.moving = False           # between an 'onset' and its 'end'
+        self._last_stamp_ns = None    # last accepted stamp
+        self._t_ref_ns = None         # stream times are seconds since this stamp
+        self._last_arrival_ns = None  # the caller's clock when the last pose was accepted
+        self._backwards = 0
+
+    def drop(self, reason: str) -> ObservedPose:
+        self.counts.dropped[reason] += 1
+        return ObservedPose(rejected=reason)
+
+    def on_pose(self, stamp_ns: int, frame_id: str, position, orientation_xyzw,
+                now_ns: int) -> ObservedPose:
+        """One pose (position and unit quaternion (x, y, z, w) in the mocap frame)."""
+        reason = check_pose(stamp_ns, frame_id, position, orientation_xyzw, self._last_stamp_ns,
+                            self.expected_frame, self.quaternion_tolerance)
+        restarted_events = None
+        if reason == 'stamp_backwards' and self._restarted():
+            restarted_events = self._restart()
+            reason = None
+        if reason is not None:
+            return self.drop(reason)
+        self._backwards = 0
+        if self._t_ref_ns is None:
+            self._t_ref_ns = stamp_ns
+        self._last_stamp_ns = stamp_ns
+        # Zero: simulated time whose /clock has not started yet; no basis to judge silences on.
+        self._last_arrival_ns = now_ns if now_ns > 0 else None
+        self.counts.accepted += 1
+        self.counts.published['observations'] += 1
+        point = self.transform.apply(*position)
+        events = self._settle(self.segmenter.update((stamp_ns - self._t_ref_ns) * 1e-9, point))
+        if restarted_events is not None:
+            events = restarted_events + events
+        return ObservedPose(point=point, events=events, restarted=restarted_events is not None)
+
+    def on_timer(self, now_ns: int) -> List[Tuple[str, int]]:
+        """Events a silence of the stream settles, judged at ``now_ns`` on the caller's clock."""
+        if self._last_arrival_ns is None:
+            return []
+        silence = (now_ns - self._last_arrival_ns) * 1e-9
+        if silence <= self.segmenter.gap_timeout:
+            return []
+        return self._settle(self.segmenter.gap(self.segmenter.last_time + silence))
+
+    def _settle(self, events: List[Event]) -> List[Tuple[str, int]]:
+        out = []
+        for ev in events:
+            out.append((ev.kind, self._t_ref_ns + round(ev.time * 1e9)))
+            self.counts.published[ev.kind] += 1
+            if ev.kind in ('onset', 'end'):
+                self.moving = ev.kind == 'onset'
+        return out
+
+    def _restarted(self) -> bool:
+        """Count a pose older than the last accepted one; True once the stream restarted."""
+        if self.restart_after <= 0:
+            return False
+        self._backwards += 1
+        return self._backwards >= self.restart_after
+
+    def _restart(self) -> List[Tuple[str, int]]:
+        """Forget the old stream; an interaction in progress ends at its last sample."""
+        events = []
+        last_t = self.segmenter.last_time
+        if self.moving and last_t is not None:
+            events = self._settle([Event('end', last_t)])
+        self.segmenter.reset()
+        self.moving = False
+        self._t_ref_ns = self._last_stamp_ns = self._last_arrival_ns = None
+        self._backwards = 0
+        self.counts.stream_restarts += 1
+        return events

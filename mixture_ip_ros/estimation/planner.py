@@ -1,0 +1,369 @@
+"""What the estimator node decides, without ROS: one interaction at a time (idle -> observing ->
+committed -> done), the online estimate of (component, phase speed), when to commit the robot,
+when to replan, and the plan it is sent.
+
+Every entry point takes the present on the caller's clock (``now_ns``, the node clock: simulated
+time under use_sim_time) and says whether a replan is due; :meth:`OnlinePlanner.replan` returns
+the :class:`Step` to publish. No wall clock is read, so a run on simulated time is
+deterministic. Observations are stamped; time inside an interaction is seconds since its
+onset on the stamps' clock.
+
+Held samples: observations that arrive outside an interaction are held (estimation.held). At an
+onset those from the dated onset on are admitted (thinned by min_interval) into a backlog that is
+conditioned on ``backlog_slice`` samples per call, while live observations are conditioned on at
+once: the posterior does not depend on the order (OnlineEstimator.absorb), and a live sample
+never waits behind the whole backlog. The robot is committed only once the backlog is absorbed:
+on all the evidence, as if every sample had been conditioned on when it came.
+
+Commit (:func:`should_commit`): the first plan is sent once p(k* | D) >= ``confidence_threshold``
+with at least ``min_observations`` observations used; afterwards every replan is sent, also when
+k* changes (the controller blends from its current state into the new plan).
+"""
+
+from collections import deque
+from dataclasses import dataclass, replace
+from typing import Optional
+
+import numpy as np
+
+from mixture_ip_ros.estimation.held import HeldSamples
+from mixture_ip_ros.estimation.plans import (Plan, PosteriorSummary, build_plan, check_plan,
+                                             posterior_summary)
+from mixture_ip_ros.estimation.records import Interaction, ObservationCounts, Switch
+from mixture_ip_ros.estimation.schedule import ReplanSchedule
+
+STATES = ('idle', 'observing', 'committed', 'done')
+MAX_LAG = 1.0   # s; a present further ahead of the latest observation means another clock
+
+
+def should_commit(component_posterior, n_observations: int, confidence_threshold: float,
+                  min_observations: int) -> bool:
+    """Whether the robot may start: enough evidence and a confident most probable component."""
+    return (n_observations >= min_observations
+            and float(np.max(component_posterior)) >= confidence_threshold)
+
+
+@dataclass(frozen=True)
+class PlannerSettings:
+    """How the planner commits, replans and plans. ``replan_period`` is 1 / the replan rate;
+    ``backlog_slice``: held samples conditioned on per call after an onset."""
+
+    confidence_threshold: float = 0.9
+    min_observations: int = 3
+    n_points: int = 25
+    lookahead: float = 0.1
+    settle_time: float = 0.5
+    hold_window: float = 2.5
+    backlog_slice: int = 8
+    replan_period: float = 0.1
+    replan_on_observation: bool = True
+    max_records: int = 1000
+
+    def __post_init__(self):
+        def need(ok, what):
+            if not ok:
+                raise ValueError(what)
+        need(0.0 < self.confidence_threshold <= 1.0,
+             f'confidence_threshold must be in (0, 1], got {self.confidence_threshold}')
+        for name, low in (('min_observations', 1), ('n_points', 2), ('backlog_slice', 1),
+                          ('max_records', 1)):
+            value = getattr(self, name)
+            need(int(value) == value and value >= low,
+                 f'{name} must be an integer >= {low}, got {value}')
+        need(np.isfinite(self.lookahead) and self.lookahead >= 0,
+             f'lookahead must be >= 0 s, got {self.lookahead}')
+        for name in ('settle_time', 'hold_window', 'replan_period'):
+            value = getattr(self, name)
+            need(np.isfinite(value) and value > 0, f'{name} must be > 0 s, got {value}')
+
+
+@dataclass
+class Step:
+    """What one replan produced: always the posterior summary and the plan (its hypothesis is
+    the one of the predicted path); ``send`` says whether the joint trajectory goes out;
+    ``problem`` is check_plan's reason not to publish. ``trigger_ns``: the stamp of the latest
+    evidence the plan rests on (the observation or the 'end' event that brought it)."""
+
+    summary: PosteriorSummary
+    plan: Optional[Plan]
+    send: bool
+    trigger_ns: int
+    committed_now: bool = False
+    switched_from: Optional[int] = None
+    problem: Optional[str] = None
+
+
+class OnlinePlanner:
+    """The estimator node's logic; see the module docstring.
+
+    ``observe(stamp_ns, y, now_ns)`` feeds an observation and returns (result, due): result is
+    'used', 'skipped', 'held' (no interaction yet) or the reason it was rejected, due whether the
+    caller should :meth:`replan` now. ``onset`` and ``tick`` (the replan timer) return whether a
+    replan is due; ``end`` returns the last step.
+    """
+
+    def __init__(self, estimator, settings: PlannerSettings = PlannerSettings(), *,
+                 labels=None, catch_up_velocity=None):
+        if labels is not None and len(labels) != estimator.n_components:
+            raise ValueError(f'{len(labels)} component labels for {estimator.n_components} '
+                             'components')
+        self.estimator = estimator
+        self.labels = None if labels is None else list(labels)
+        self.catch_up_velocity = (None if catch_up_velocity is None
+                                  else np.asarray(catch_up_velocity, dtype=float))
+        self.robot_q = None       # latest robot joints (set by the node), for catching up
+        self.state = 'idle'
+        self.interactions = []
+        self.counts = ObservationCounts()
+        self._settings = settings
+        self._held = HeldSamples(settings.hold_window)
+        self._schedule = ReplanSchedule(settings.replan_period, settings.replan_on_observation)
+        self._backlog = deque()   # (t, y) admitted at the onset, not yet absorbed
+        self._onset_ns = None
+        self._t_latest = None     # latest observation time (s since onset), used or skipped
+        self._y_latest = None     # and the observed position then
+        self._trigger_ns = None   # its stamp
+        self._dirty = False       # something new since the last replan
+        self._sent_component = None
+        self._final_time = None   # time of the last final (at rest) plan's point
+
+    # -- settings ---------------------------------------------------------------------
+    @property
+    def settings(self) -> PlannerSettings:
+        return self._settings
+
+    def update_settings(self, **changes) -> None:
+        """Change settings at run time (validated; nothing changes if one is invalid). The hold
+        window applies to samples held from now on."""
+        new = replace(self._settings, **changes)
+        if new.hold_window != self._settings.hold_window:
+            self._held = HeldSamples(new.hold_window)
+        self._schedule.period = new.replan_period
+        self._schedule.on_observation = new.replan_on_observation
+        self._settings = new
+
+    # -- queries ----------------------------------------------------------------------
+    @property
+    def current(self) -> Optional[Interaction]:
+        return self.interactions[-1] if self.interactions else None
+
+    @property
+    def onset_ns(self) -> Optional[int]:
+        return self._onset_ns
+
+    @property
+    def t_now(self) -> float:
+        """Latest observation time of the interaction, s since onset (0 before any)."""
+        return 0.0 if self._t_latest is None else self._t_latest
+
+    @property
+    def active(self) -> bool:
+        return self.state in ('observing', 'committed')
+
+    @property
+    def n_held(self) -> int:
+        return len(self._held)
+
+    @property
+    def n_backlog(self) -> int:
+        """Held observations of the interaction not yet absorbed."""
+        return len(self._backlog)
+
+    def label(self, k: Optional[int]):
+        return None if (k is None or self.labels is None) else self.labels[k]
+
+    # -- input ------------------------------------------------------------------------
+    def reject(self, reason: str) -> str:
+        self.counts.rejected[reason] += 1
+        return reason
+
+    def refuse(self, reason: str) -> str:
+        """Count an observation received and rejected before ``observe`` (e.g. wrong frame)."""
+        self._received()
+        return self._rejected_in_interaction(reason)
+
+    def onset(self, stamp_ns: int) -> bool:
+        """Start an interaction at ``stamp_ns``: the held observations from then on are
+        admitted into the backlog (older ones were rest before the movement: dropped). True if
+        a replan is due (the first slice emptied the backlog)."""
+        if self.active:
+            self._close('new_onset', None)
+        self.estimator.reset()
+        self._schedule.restart()
+        self._onset_ns = int(stamp_ns)
+        self._t_latest = self._y_latest = None
+        self._trigger_ns = self._onset_ns
+        self._dirty = True
+        self._sent_component = None
+        self._final_time = None
+        self.state = 'observing'
+        excess = len(self.interactions) + 1 - self._settings.max_records
+        if excess > 0:
+            del self.interactions[:excess]
+        self.interactions.append(Interaction(onset_stamp_ns=self._onset_ns))
+        for ns, y in self._held.take_from(self._onset_ns):
+            self.current.n_received += 1
+            self._take(ns, y, defer=True)
+        return self._absorb_slice()
+
+    def gap(self) -> None:
+        if self.active:
+            self.current.gaps += 1
+
+    def observe(self, stamp_ns: int, y, now_ns: Optional[int] = None):
+        """Feed one observation; returns (result, whether a replan is due now)."""
+        result = self._observe(int(stamp_ns), y)
+        finished_backlog = self._absorb_slice()
+        if result == 'used' and self._schedule.due_on_observation(self.t_now, now_ns):
+            self._schedule.observation_replanned(self.t_now)
+            return result, True
+        return result, finished_backlog     # on all the evidence: may commit now
+
+    def tick(self, now_ns: Optional[int] = None) -> bool:
+        """The replan timer: absorbs a slice of the backlog; True if that finished it or no
+        observation replanned for a period (a replan is due)."""
+        return self._absorb_slice() or self._schedule.due_on_timer(now_ns)
+
+    def end(self, stamp_ns: int, now_ns: Optional[int] = None) -> Optional[Step]:
+        """The human stopped: the last plan (sent only if committed), then 'done'."""
+        if not self.active:
+            return None
+        self._absorb_slice(len(self._backlog))
+        t_end = (int(stamp_ns) - self._onset_ns) * 1e-9
+        if np.isfinite(t_end) and t_end > self.t_now:
+            self._t_latest = t_end
+            self._trigger_ns = int(stamp_ns)
+        step = self.replan(now_ns, final=True)
+        self._close('end', t_end)
+        return step
+
+    def deactivate(self) -> None:
+        """The node stops commanding: the interaction in progress ends here."""
+        if self.active:
+            self._close('deactivated', None)
+
+    def _received(self):
+        self.counts.received += 1
+        if self.active:
+            self.current.n_received += 1
+
+    def _observe(self, stamp_ns: int, y) -> str:
+        self._received()
+        y = np.asarray(y, dtype=float)
+        if y.shape != (self.estimator.n_observed,) or not np.isfinite(y).all():
+            return self._rejected_in_interaction('non_finite')
+        if not self.active:
+            self._held.add(stamp_ns, y)
+            return 'held'
+        return self._take(stamp_ns, y, defer=False)
+
+    def _absorb_slice(self, n: Optional[int] = None) -> bool:
+        """Condition on the next ``n`` (default backlog_slice) backlog observations; True if
+        that emptied the backlog."""
+        if not self._backlog:
+            return False
+        for _ in range(min(len(self._backlog), n or self._settings.backlog_slice)):
+            self.estimator.absorb(*self._backlog.popleft())
+        self._dirty = True
+        return not self._backlog
+
+    def _take(self, stamp_ns: int, y, defer: bool) -> str:
+        """An observation of the current interaction: conditioned on now, or (``defer``)
+        appended to the backlog."""
+        rec = self.current
+        t = (stamp_ns - self._onset_ns) * 1e-9
+        if t < 0:
+            return self._rejected_in_interaction('before_onset')
+        if self._t_latest is not None and t <= self._t_latest:
+            return self._rejected_in_interaction('time_backwards')
+        try:
+            used = self.estimator.admit(t)
+            if used and not defer:
+                self.estimator.absorb(t, y)
+        except ValueError:
+            return self._rejected_in_interaction('exception')
+        self._t_latest = t
+        self._y_latest = y
+        self._trigger_ns = stamp_ns
+        self._dirty = True
+        if used:
+            if defer:
+                self._backlog.append((t, y))
+            self.counts.used += 1
+            rec.n_observations += 1
+            return 'used'
+        self.counts.skipped += 1
+        rec.n_skipped += 1
+        return 'skipped'
+
+    def _rejected_in_interaction(self, reason):
+        if self.active:
+            self.current.n_rejected += 1
+        return self.reject(reason)
+
+    # -- planning ---------------------------------------------------------------------
+    def replan(self, now_ns: Optional[int] = None, final: bool = False) -> Optional[Step]:
+        """Update the summary and the plan: None when there is no interaction or nothing new
+        since the last replan.
+
+        ``now_ns``: the present on the stamps' clock, when known. Observations reach the planner
+        some milliseconds after their stamps; the plan starts from the present (if it is later
+        than the latest observation by less than MAX_LAG s), so its first point and its end are
+        never already in the past when the controller receives it."""
+        if not self.active or not (self._dirty or final):
+            return None
+        self._dirty = False
+        self._schedule.replanned(now_ns)
+        s = self._settings
+        est = self.estimator
+        rec = self.current
+        t_now = self.t_now
+        summary = posterior_summary(est, t_now)
+        k = summary.component
+        rec.component, rec.label, rec.confidence = k, self.label(k), summary.confidence
+        rec.alpha, rec.phase = summary.alpha, summary.phase
+        t_plan = t_now
+        if now_ns is not None:
+            clock_now = (int(now_ns) - self._onset_ns) * 1e-9
+            if t_now < clock_now <= t_now + MAX_LAG:
+                t_plan = clock_now
+        plan = build_plan(est, t_plan, n_points=s.n_points, lookahead=s.lookahead,
+                          settle_time=s.settle_time, component=k, alpha=summary.alpha,
+                          final_time=self._final_time, robot_q=self.robot_q,
+                          catch_up_velocity=self.catch_up_velocity,
+                          final_position=self._y_latest if final else None)
+        trigger = self._trigger_ns
+        problem = check_plan(plan)
+        if problem is not None:
+            self.counts.plan_failures += 1
+            return Step(summary, plan, send=False, trigger_ns=trigger, problem=problem)
+        committed_now = False
+        if self.state == 'observing':
+            if self._backlog or not should_commit(summary.probabilities, est.n_observations,
+                                                  s.confidence_threshold, s.min_observations):
+                return Step(summary, plan, send=False, trigger_ns=trigger)
+            committed_now = True
+            self.state = rec.state = 'committed'
+            rec.commit_phase, rec.commit_elapsed = summary.phase, t_now
+            rec.commit_component, rec.commit_observations = k, est.n_observations
+        switched_from = None
+        if self._sent_component is not None and k != self._sent_component:
+            switched_from = self._sent_component
+            rec.switches.append(Switch(t_now, summary.phase, switched_from, k))
+        self._sent_component = k
+        if plan.final:
+            self._final_time = float(plan.times[-1])
+        self.counts.plans_sent += 1
+        rec.plans += 1
+        return Step(summary, plan, send=True, trigger_ns=trigger, committed_now=committed_now,
+                    switched_from=switched_from)
+
+    def _close(self, reason: str, t_end: Optional[float]) -> None:
+        self._backlog.clear()
+        rec = self.current
+        rec.end_reason = reason
+        rec.end_elapsed = t_end
+        rec.final_component = rec.component
+        rec.final_label = rec.label
+        rec.state = 'done'
+        self.state = 'done'

@@ -1,0 +1,165 @@
+"""The robot's plan under one hypothesis (component, phase speed), and the posterior summary
+that goes with every replan.
+
+Time is seconds since the interaction's onset on the observations' clock (their stamps).
+
+Plan (:func:`build_plan`): under the MAP hypothesis (k*, alpha*), ``n_points`` phases evenly
+spaced from ``z_start = alpha* (t_now + lookahead)`` to 1, ``times = z / alpha*``, positions,
+velocities and accelerations of the conditioned robot trajectory (eq. 13); the first point lies
+``lookahead`` ahead of the present so the controller gets a reachable target, and the last
+point's velocity and acceleration are zero (the human holds still past z = 1, and
+joint_trajectory_controller rejects a trajectory ending in motion). When ``z_start`` >= 1 (the
+human is at rest) the plan is a single point: the predicted final posture, reached
+``max(lookahead, settle_time)`` after ``t_now``; later final plans of the same interaction keep
+that time (while it is still ahead) so that the arrival does not recede with every replan.
+"""
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+PHASE_EPS = 1e-6
+
+
+@dataclass(frozen=True)
+class PosteriorSummary:
+    """What the estimator believes after an update: p(k | D) for every component, the MAP
+    component k* and its MAP phase speed alpha* (1/s), the phase z = alpha* t in [0, 1] at the
+    latest observation, and the confidence p(k* | D)."""
+
+    probabilities: np.ndarray
+    component: int
+    alpha: float
+    phase: float
+
+    @property
+    def confidence(self) -> float:
+        return float(self.probabilities[self.component])
+
+    @staticmethod
+    def labels(n_components: int) -> list:
+        """Field names of :meth:`as_array` (the posterior topic's layout)."""
+        return [f'p{k}' for k in range(n_components)] + ['alpha', 'phase', 'confidence',
+                                                         'component']
+
+    def as_array(self) -> np.ndarray:
+        """[p(k=0 | D) .. p(k=K-1 | D), alpha*, phase, confidence, k*]."""
+        return np.concatenate([self.probabilities, [self.alpha, self.phase, self.confidence,
+                                                    self.component]]).astype(float)
+
+
+def posterior_summary(estimator, t_now: float) -> PosteriorSummary:
+    """The summary of an OnlineEstimator's posterior, the phase taken at ``t_now`` (s since
+    onset)."""
+    k, alpha = estimator.map_hypothesis()
+    return PosteriorSummary(probabilities=estimator.component_posterior(), component=int(k),
+                            alpha=float(alpha), phase=float(np.clip(alpha * t_now, 0.0, 1.0)))
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Robot plan under one hypothesis (component, alpha).
+
+    times (n,) s since onset; phases (n,); positions, velocities, accelerations (n, Q) in joint
+    order of the model. final: the human is at rest (single point at the final posture).
+    """
+
+    times: np.ndarray
+    phases: np.ndarray
+    positions: np.ndarray
+    velocities: np.ndarray
+    accelerations: np.ndarray
+    component: int
+    alpha: float
+    final: bool
+
+
+def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float = 0.1,
+               settle_time: float = 0.5, component: Optional[int] = None,
+               alpha: Optional[float] = None, final_time: Optional[float] = None,
+               robot_q=None, catch_up_velocity=None, final_position=None) -> Plan:
+    """The plan from ``t_now`` (s since onset) on, for (component, alpha) (default: the MAP).
+
+    ``final_time``: when the human is at rest, the time of the final point if it is at least
+    ``lookahead`` ahead of ``t_now`` (else ``t_now + max(lookahead, settle_time)``).
+    ``robot_q``/``catch_up_velocity``: the robot's current joints and the joint speeds it may
+    use to catch up with the plan. Points it cannot reach in time at those speeds are dropped
+    (the controller blends from its state into the first kept point); if none is reachable the
+    plan is the last point, timed when it can be reached. Without them, no catch-up limit.
+    ``final_position``: the human's movement has ended here (the observer's 'end'): the plan is
+    the single final posture conditioned on this final position at z = 1
+    (``OnlineEstimator.predict_at_rest``).
+    """
+    if n_points < 2:
+        raise ValueError(f'n_points must be >= 2, got {n_points}')
+    if not np.isfinite(t_now) or t_now < 0:
+        raise ValueError(f't_now must be finite and >= 0, got {t_now}')
+    if component is None or alpha is None:
+        k_map, a_map = estimator.map_hypothesis()
+        component = k_map if component is None else component
+        alpha = a_map if alpha is None else alpha
+    a = float(alpha)
+    z_start = a * (t_now + lookahead)
+    final = final_position is not None or z_start >= 1.0 - PHASE_EPS
+    if final:
+        phases = np.array([1.0])
+        if final_time is None or not final_time >= t_now + lookahead:
+            final_time = t_now + max(lookahead, settle_time)
+        times = np.array([float(final_time)])
+    else:
+        phases = np.linspace(z_start, 1.0, n_points)
+        times = phases / a
+    # a: the grid value actually used (identical when it came from the grid)
+    k, a, (pos, vel, acc), _ = estimator.mean_trajectories(phases, component=component, alpha=a)
+    vel[-1] = 0.0
+    acc[-1] = 0.0
+    if final_position is not None:
+        pos[-1] = estimator.predict_at_rest(final_position, component=k)[0]
+    if robot_q is not None and catch_up_velocity is not None:
+        reachable_at = t_now + np.max(np.abs(pos - np.asarray(robot_q))
+                                      / np.asarray(catch_up_velocity), axis=1)
+        ok = np.flatnonzero(times >= reachable_at)
+        first = ok[0] if ok.size else len(times) - 1
+        times = times.copy()
+        times[first] = max(times[first], reachable_at[first])
+        phases, times, pos, vel, acc = (x[first:] for x in (phases, times, pos, vel, acc))
+    return Plan(times=times, phases=phases, positions=pos, velocities=vel, accelerations=acc,
+                component=k, alpha=a, final=bool(final))
+
+
+def predicted_paths(estimator, n_points: int, components=None):
+    """The whole predicted human movement (phases evenly spaced over 0..1) of each component
+    under its MAP alpha: a list of (component, alpha, times (s since onset), positions
+    (n_points, P)) for ``components`` (default: all)."""
+    phases = np.linspace(0.0, 1.0, n_points)
+    out = []
+    joint = estimator.joint_posterior()
+    for k in (range(estimator.n_components) if components is None else components):
+        alpha = float(estimator.alphas[int(np.argmax(joint[k]))])
+        _, a, _, positions = estimator.mean_trajectories((), phases, component=k, alpha=alpha)
+        out.append((int(k), a, phases / a, positions))
+    return out
+
+
+def predicted_wrist(estimator, plan: Plan, n_points: int):
+    """The whole predicted human movement under the plan's hypothesis: times (s since onset)
+    and positions (n_points, P) at phases evenly spaced over 0..1."""
+    phases = np.linspace(0.0, 1.0, n_points)
+    _, a, _, positions = estimator.mean_trajectories((), phases, component=plan.component,
+                                                     alpha=plan.alpha)
+    return phases / a, positions
+
+
+def check_plan(plan: Plan) -> Optional[str]:
+    """Why the plan must not be published (None if it may): non-finite values, times not
+    strictly increasing at nanosecond resolution, motion at the last point."""
+    for name in ('times', 'positions', 'velocities', 'accelerations'):
+        if not np.isfinite(getattr(plan, name)).all():
+            return f'non-finite {name}'
+    ns = np.round(plan.times * 1e9)
+    if ns[0] < 0 or (ns[1:] <= ns[:-1]).any():
+        return 'times not strictly increasing (or negative)'
+    if plan.velocities[-1].any() or plan.accelerations[-1].any():
+        return 'last point not at rest'
+    return None

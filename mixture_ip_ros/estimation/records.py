@@ -1,0 +1,114 @@
+"""What the estimator keeps about its work: one record per interaction, counts of the
+observations it took or refused, and latency statistics (dataclasses, for diagnostics, logs and
+reports)."""
+
+from dataclasses import dataclass, field
+from typing import Optional
+
+# Why the estimator did not use an observation ('skipped', within min_interval of the last one
+# used, is not a rejection).
+OBSERVATION_REJECT_REASONS = ('wrong_frame', 'non_finite', 'before_onset', 'time_backwards',
+                              'exception', 'bad_joint_state')
+
+
+def _absolute(onset_ns: int, elapsed: Optional[float]) -> Optional[float]:
+    return None if elapsed is None else (onset_ns + round(elapsed * 1e9)) * 1e-9
+
+
+@dataclass
+class Switch:
+    """The MAP component changed after the robot was committed."""
+
+    elapsed: float          # s since the onset
+    phase: float
+    from_component: int
+    to_component: int
+
+
+@dataclass
+class Interaction:
+    """One interaction, from its onset to its end.
+
+    Absolute times (``*_time``) are seconds on the observations' clock, ``*_elapsed`` seconds
+    since the onset. ``component``, ``label``, ``confidence``, ``alpha`` and ``phase`` are those
+    of the latest replan; ``final_*`` are set when the interaction closes. ``commit_phase`` is
+    the phase at the first plan sent, i.e. the fraction of the human movement seen (None if the
+    robot never moved). ``end_reason`` is 'end' (the observer's event), 'new_onset' (another
+    interaction started first) or 'deactivated' (the node stopped); None while it runs.
+    """
+
+    onset_stamp_ns: int
+    state: str = 'observing'
+    component: Optional[int] = None
+    label: Optional[str] = None
+    confidence: Optional[float] = None
+    alpha: Optional[float] = None
+    phase: float = 0.0
+    final_component: Optional[int] = None
+    final_label: Optional[str] = None
+    commit_phase: Optional[float] = None
+    commit_elapsed: Optional[float] = None
+    commit_component: Optional[int] = None
+    commit_observations: Optional[int] = None
+    n_observations: int = 0
+    n_received: int = 0
+    n_skipped: int = 0
+    n_rejected: int = 0
+    plans: int = 0
+    switches: list = field(default_factory=list)
+    gaps: int = 0
+    end_reason: Optional[str] = None
+    end_elapsed: Optional[float] = None
+
+    @property
+    def onset_time(self) -> float:
+        return self.onset_stamp_ns * 1e-9
+
+    @property
+    def commit_time(self) -> Optional[float]:
+        return _absolute(self.onset_stamp_ns, self.commit_elapsed)
+
+    @property
+    def end_time(self) -> Optional[float]:
+        return _absolute(self.onset_stamp_ns, self.end_elapsed)
+
+    @property
+    def committed(self) -> bool:
+        return self.commit_phase is not None
+
+
+@dataclass
+class ObservationCounts:
+    """Totals since the start, over every interaction."""
+
+    received: int = 0
+    used: int = 0
+    skipped: int = 0
+    rejected: dict = field(default_factory=lambda: dict.fromkeys(OBSERVATION_REJECT_REASONS, 0))
+    plans_sent: int = 0
+    plan_failures: int = 0
+
+    @property
+    def n_rejected(self) -> int:
+        return sum(self.rejected.values())
+
+
+class LatencyStats:
+    """Last / mean / max of a duration, in microseconds."""
+
+    def __init__(self):
+        self.count = 0
+        self.last_us = 0.0
+        self.max_us = 0.0
+        self._sum_us = 0.0
+
+    def add(self, seconds: float) -> None:
+        us = seconds * 1e6
+        self.count += 1
+        self.last_us = us
+        self._sum_us += us
+        self.max_us = max(self.max_us, us)
+
+    @property
+    def mean_us(self) -> float:
+        return self._sum_us / self.count if self.count else 0.0

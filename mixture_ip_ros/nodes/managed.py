@@ -1,0 +1,146 @@
+"""Managed (lifecycle) nodes of the package, and the one ``main`` every executable uses.
+
+A managed node declares its parameter schema at construction (so ``describe_parameters`` and
+``ros2 param`` work in every state), and then follows the ROS 2 node lifecycle:
+
+- configure: read the parameters, load and check what the node needs (model, scene); a problem
+  is logged in one line and the node stays unconfigured;
+- activate: subscribe, publish, start timers;
+- deactivate: stop at once (no more commands; the node stays configured);
+- cleanup: free what configure made; shutdown: clean up from any state.
+
+With the parameter ``autostart`` (default true) :func:`run_node` configures and activates the node
+itself, so ``ros2 run``-style use is one command; with false it waits for the lifecycle services
+(``mixture-ip lifecycle NODE TRANSITION``).
+"""
+
+import rclpy
+from rclpy.exceptions import ParameterException
+from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
+from rclpy.logging import get_logger
+
+from mixture_ip_ros.nodes.params import declare
+from mixture_ip_ros.nodes.spinning import spin_until_shutdown
+
+SUCCESS = TransitionCallbackReturn.SUCCESS
+FAILURE = TransitionCallbackReturn.FAILURE
+
+
+class ManagedNode(LifecycleNode):
+    """Subclasses set ``SCHEMA`` (a params dataclass with an ``autostart`` field) and implement
+    ``configure`` / ``activate`` / ``deactivate`` / ``cleanup``; a ValueError from ``configure``
+    or ``activate`` refuses the transition with its message."""
+
+    SCHEMA = None
+
+    def __init__(self, name: str, **kwargs):
+        super().__init__(name, **kwargs)
+        self.refusal = None         # why the last configure or activate failed
+        self.params = declare(self, self.SCHEMA, self.apply_parameters)
+        self.add_post_set_parameters_callback(self._log_parameter_change)
+
+    # -- to implement -----------------------------------------------------------------
+    def configure(self) -> None:
+        pass
+
+    def activate(self) -> None:
+        pass
+
+    def deactivate(self) -> None:
+        pass
+
+    def cleanup(self) -> None:
+        pass
+
+    def apply_parameters(self, changes: dict) -> None:
+        """Apply accepted run-time parameter changes {name: value}; ValueError refuses them."""
+        for name, value in changes.items():
+            setattr(self.params, name, value)
+
+    # -- lifecycle ----------------------------------------------------------------------
+    @property
+    def lifecycle_state(self) -> str:
+        return self._state_machine.current_state[1]
+
+    def on_configure(self, state):
+        return self._run('configure', self.configure, undo=self.cleanup)
+
+    def on_activate(self, state):
+        super().on_activate(state)          # enables the lifecycle publishers
+        result = self._run('activate', self.activate, undo=self.deactivate)
+        if result != SUCCESS:
+            super().on_deactivate(state)
+        return result
+
+    def on_deactivate(self, state):
+        self.deactivate()
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state):
+        self.cleanup()
+        return SUCCESS
+
+    def on_shutdown(self, state):
+        if state.label == 'active':
+            self.on_deactivate(state)
+        if state.label in ('active', 'inactive'):
+            self.cleanup()
+        return SUCCESS
+
+    def on_error(self, state):
+        self.get_logger().error(f'error while {state.label}: cleaning up')
+        self.cleanup()
+        return SUCCESS
+
+    def _run(self, what, step, undo):
+        try:
+            step()
+        except (ValueError, ParameterException) as exc:
+            self.refusal = str(exc)
+            self.get_logger().error(f'cannot {what}: {exc}')
+            undo()
+            return FAILURE
+        self.refusal = None
+        return SUCCESS
+
+    def start(self) -> bool:
+        """Configure and activate if ``autostart``; False if a transition failed."""
+        if not self.params.autostart:
+            self.get_logger().info('autostart is off: waiting for lifecycle transitions '
+                                   '(configure, activate)')
+            return True
+        return (self.trigger_configure() == SUCCESS and self.trigger_activate() == SUCCESS)
+
+    def _log_parameter_change(self, parameters):
+        names = {p.name for p in parameters}
+        if names & {n for n in vars(self.params)}:
+            self.get_logger().info('parameters changed: ' + ', '.join(
+                f'{p.name} = {p.value}' for p in parameters))
+
+
+def run_node(node_class, args=None, done=None) -> int:
+    """The ``main`` of every executable: start the node (and its lifecycle, for a managed node
+    with ``autostart``), spin until Ctrl-C, an external shutdown or ``done(node)``, and exit 0.
+    A node that cannot start (bad parameter, missing or invalid file) logs one line and exits 1,
+    without a traceback."""
+    rclpy.init(args=args)
+    name = getattr(node_class, 'NODE_NAME', node_class.__name__)
+    node = None
+    try:
+        node = node_class()
+        if isinstance(node, ManagedNode) and not node.start():
+            get_logger(name).fatal(f'refusing to start: {node.refusal}')
+            return 1
+        if not rclpy.ok():      # Ctrl-C while starting up
+            return 0
+        spin_until_shutdown(node, None if done is None else (lambda: done(node)))
+        return 0
+    except KeyboardInterrupt:
+        return 0
+    except (ValueError, ParameterException) as exc:
+        get_logger(name).fatal(f'refusing to start: {exc}')
+        return 1
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()

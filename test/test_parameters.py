@@ -1,0 +1,97 @@
+"""Every node's parameters come from one schema: the files in config/ and the README's tables
+are checked against it, and the nodes load those files as they are."""
+
+import os
+from pathlib import Path
+import re
+import subprocess
+import sys
+
+import pytest
+import yaml
+from rclpy.parameter import Parameter
+
+from conftest import private_domain_id
+from mixture_ip_ros.core.share import config_path
+from mixture_ip_ros.nodes.bag_player import BagPlayerParameters
+from mixture_ip_ros.nodes.estimator_node import EstimatorParameters
+from mixture_ip_ros.nodes.observer_node import ObserverNode, ObserverParameters
+from mixture_ip_ros.nodes.params import check_params_file, markdown_table, specs
+from mixture_ip_ros.nodes.sim_node import SimNode, SimParameters
+
+README = Path(__file__).resolve().parents[1] / 'README.md'
+NODES = {'estimator_node': ('estimator.yaml', EstimatorParameters),
+         'observer_node': ('observer.yaml', ObserverParameters),
+         'sim_node': ('sim.yaml', SimParameters),
+         'bag_player': ('bag_player.yaml', BagPlayerParameters)}
+# Values the shipped files set on purpose to something other than the schema's default.
+DELIBERATE = {'bag_player': {}, 'estimator_node': {}, 'observer_node': {}, 'sim_node': {}}
+
+
+def _file(node):
+    name, _ = NODES[node]
+    return yaml.safe_load(config_path(name).read_text())[node]['ros__parameters']
+
+
+@pytest.mark.parametrize('node', sorted(NODES))
+def test_config_file_sets_every_parameter_validly_and_documents_the_defaults(node):
+    schema = NODES[node][1]
+    values = _file(node)
+    missing_ok = {n for n, default, _ in specs(schema) if default == []}   # no YAML type
+    problems = [p for p in check_params_file(schema, values)
+                if not any(p == f'parameter {n} missing' for n in missing_ok)]
+    assert problems == []
+    for name, default, _ in specs(schema):
+        if name in values:
+            assert values[name] == DELIBERATE[node].get(name, default), name
+
+
+@pytest.mark.parametrize('node_class, node', [(ObserverNode, 'observer_node'),
+                                              (SimNode, 'sim_node')])
+def test_nodes_load_their_config_file(ros_context, node_class, node):
+    path = config_path(NODES[node][0])
+    n = node_class(context=ros_context, cli_args=['--ros-args', '--params-file', str(path)])
+    try:
+        for name, value in _file(node).items():
+            assert n.get_parameter(name).value == value, name
+    finally:
+        n.destroy_node()
+
+
+def test_the_readme_tables_are_the_schemas():
+    text = README.read_text()
+    for node, (_, schema) in NODES.items():
+        match = re.search(rf'<!-- parameters: {node} -->\n(.*?)\n<!-- end -->', text, re.S)
+        assert match, f'README has no parameter table for {node}'
+        assert match.group(1).strip() == markdown_table(schema), (
+            f'README table of {node} is stale: regenerate it with `mixture-ip params {node}`')
+
+
+def test_a_check_names_the_parameter_and_the_rule():
+    problems = check_params_file(ObserverParameters, {**_file('observer_node'),
+                                                      'onset_sped': 0.1,
+                                                      'mocap_to_base_xyzw': [0.0, 0.0, 0.0, 2.0],
+                                                      'gap_timeout': 'soon'})
+    assert 'unknown parameter onset_sped' in problems
+    assert any(p.startswith('parameter mocap_to_base_xyzw: is not unit length') for p in problems)
+    assert any(p.startswith('parameter gap_timeout: expected float') for p in problems)
+
+
+def test_unknown_parameter_names_are_warned_about(ros_context, capfd):
+    node = ObserverNode(context=ros_context, parameter_overrides=[
+        Parameter('onset_sped', value=0.1)])
+    node.destroy_node()
+    assert 'unknown parameters ignored: onset_sped' in capfd.readouterr().err
+
+
+@pytest.mark.parametrize('executable', ['observer_node', 'sim_node', 'bag_player'])
+def test_a_bad_parameter_is_one_line_and_exit_1_for_every_executable(executable):
+    env = dict(os.environ, ROS_DOMAIN_ID=str(private_domain_id()))
+    bad = {'observer_node': 'onset_speed:=nan', 'sim_node': 'publish_rate:=-1.0',
+           'bag_player': 'rate:=0.0'}[executable]
+    proc = subprocess.run([str(Path(sys.executable).parent / executable), '--ros-args', '-p',
+                           bad], capture_output=True, text=True, timeout=60, env=env)
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == 1, out
+    assert 'refusing to start' in out and bad.split(':=')[0] in out, out
+    assert 'Traceback' not in out, out
