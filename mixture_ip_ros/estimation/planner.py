@@ -232,7 +232,7 @@ class OnlinePlanner:
         t_end = (int(stamp_ns) - self._onset_ns) * 1e-9
         if np.isfinite(t_end) and t_end > self.t_now:
             self._t_latest = t_end
-            self._trigger_ns = int(stamp_ns)
+        self._trigger_ns = int(stamp_ns)     # the end is dated back: often before the latest
         step = self.replan(now_ns, final=True)
         self._close('end', t_end)
         return step
