@@ -2,10 +2,9 @@
 
 import os
 
-# Every matrix here is small (at most a few hundred rows): BLAS threads only add overhead.
-# With OpenBLAS's default threads, `mixture-ip train` took 58 s instead of 13 s on 2 cores.
-# Takes effect when this package is imported before numpy (the executables); a value the
-# user set is kept.
+# Every matrix here is small (at most a few hundred rows): BLAS threads only add overhead, and
+# contend with the nodes' own threads. Takes effect when this package is imported before numpy
+# (the executables); a value the user set is kept.
 for _name in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
     os.environ.setdefault(_name, '1')
 

@@ -95,3 +95,13 @@ def test_a_bad_parameter_is_one_line_and_exit_1_for_every_executable(executable)
     assert proc.returncode == 1, out
     assert 'refusing to start' in out and bad.split(':=')[0] in out, out
     assert 'Traceback' not in out, out
+
+
+def test_the_rviz_config_shows_the_nodes_topics_in_their_frame():
+    rviz = yaml.safe_load(config_path('mixture_ip.rviz').read_text())['Visualization Manager']
+    topics = {d['Topic']['Value'] for d in rviz['Displays'] if 'Topic' in d}
+    est, obs = EstimatorParameters(), ObserverParameters()
+    assert {est.marker_topic, est.path_topic, obs.observation_topic,
+            '/iiwa/flange_pose'} <= topics
+    assert rviz['Global Options']['Fixed Frame'] == est.observed_frame == obs.base_frame \
+        == SimParameters().base_frame

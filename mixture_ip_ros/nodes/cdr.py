@@ -1,10 +1,10 @@
 """Serialized JointTrajectory and Path messages, filled from numpy arrays.
 
-Built as rclpy message objects, a 25-point JointTrajectory costs ~0.15 ms, and ~0.5 ms when the
-thread has just woken (one Python object per point and field, each checked by its setter):
-most of the estimator's time before the robot gets its plan. Publisher.publish also takes a
-serialized message, so the estimator fills a byte template instead, cached per number of
-points, where only stamps, times and numbers change.
+Built as rclpy message objects, a JointTrajectory is one Python object per point and field, each
+checked by its setter: most of the estimator's time before the robot gets its plan
+(bench/replan.py measures both ways). Publisher.publish also takes a serialized message, so the
+estimator fills a byte template instead, cached per number of points, where only stamps, times
+and numbers change.
 
 Encoding: CDR little endian as rmw_fastrtps writes it (encapsulation header 00 01 00 00, each
 primitive aligned to its size from the start of the payload, strings as uint32 length with the

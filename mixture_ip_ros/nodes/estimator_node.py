@@ -45,7 +45,7 @@ from mixture_ip_ros.nodes import qos
 from mixture_ip_ros.nodes.cdr import JointTrajectoryEncoder, PathEncoder
 from mixture_ip_ros.nodes.managed import ManagedNode, run_node
 from mixture_ip_ros.nodes.markers import prediction_markers
-from mixture_ip_ros.nodes.params import finite_list, param, positive
+from mixture_ip_ros.nodes.params import autostart_param, finite_list, param, positive
 from mixture_ip_ros.robot.description import BASE_FRAME, JOINT_NAMES
 
 N_OBSERVED = 3   # a PointStamped carries x, y, z
@@ -54,8 +54,7 @@ DIAGNOSTIC_NAME = 'estimator_node: estimation'
 
 @dataclass
 class EstimatorParameters:
-    autostart: bool = param(True, 'configure and activate at start-up; false: wait for '
-                                  'lifecycle transitions')
+    autostart: bool = autostart_param()
     model_path: str = param('', 'trained model file (.npz from mixture-ip train); required')
     observation_topic: str = param('/observer/wrist', 'geometry_msgs/PointStamped, reliable')
     event_topic: str = param('/observer/event', 'std_msgs/Header, frame_id onset | end | gap')

@@ -25,7 +25,7 @@ from mixture_ip_ros.core.stamps import ns_to_parts, stamp_to_ns
 from mixture_ip_ros.estimation.observer import WristObserver
 from mixture_ip_ros.nodes import qos
 from mixture_ip_ros.nodes.managed import ManagedNode, run_node
-from mixture_ip_ros.nodes.params import finite_list, param, positive
+from mixture_ip_ros.nodes.params import autostart_param, finite_list, param, positive
 from mixture_ip_ros.robot.description import BASE_FRAME
 
 # One source for the segmentation defaults: offline training (segment_motion) uses the same, so
@@ -48,8 +48,7 @@ def _segmenter(name, description, **kw):
 
 @dataclass
 class ObserverParameters:
-    autostart: bool = param(True, 'configure and activate at start-up; false: wait for '
-                                  'lifecycle transitions')
+    autostart: bool = autostart_param()
     wrist_topic: str = param('/mocap/wrist', 'geometry_msgs/PoseStamped, sensor-data QoS')
     observation_topic: str = param('/observer/wrist', 'geometry_msgs/PointStamped, reliable')
     event_topic: str = param('/observer/event', 'std_msgs/Header, frame_id onset | end | gap')
@@ -198,7 +197,7 @@ class ObserverNode(ManagedNode):
             self._event_pub.publish(Header(frame_id=kind, stamp=Time(sec=sec, nanosec=nanosec)))
 
     def _log_drop(self, text: str) -> None:
-        # A logger call costs ~0.4 ms even when throttled: decide here first.
+        # A logger call is costly even when throttled: decide here first.
         now = time.monotonic()
         if now < self._next_drop_log:
             return

@@ -36,6 +36,12 @@ def param(default, description: str, *, low=None, high=None, dynamic: bool = Fal
     return field(default=default, metadata={'spec': spec})
 
 
+def autostart_param():
+    """The ``autostart`` field every managed node's schema has (see nodes.managed)."""
+    return param(True, 'configure and activate at start-up; false: wait for lifecycle '
+                       'transitions (mixture-ip lifecycle NODE configure ...)')
+
+
 # -- rules a range cannot express ---------------------------------------------------------
 def positive(value) -> Optional[str]:
     return None if value > 0 else 'must be > 0'

@@ -34,7 +34,7 @@ from trajectory_msgs.msg import JointTrajectory
 from mixture_ip_ros.core.stamps import ns_to_parts, seconds_to_ns, stamp_to_ns
 from mixture_ip_ros.nodes import qos
 from mixture_ip_ros.nodes.managed import ManagedNode, run_node
-from mixture_ip_ros.nodes.params import finite_list, param, positive
+from mixture_ip_ros.nodes.params import autostart_param, finite_list, param, positive
 from mixture_ip_ros.robot.controller import DEFAULT_NATURAL_FREQUENCY
 from mixture_ip_ros.robot.description import BASE_FRAME
 from mixture_ip_ros.robot.sim import HOME, IiwaSimulation
@@ -43,8 +43,7 @@ from mixture_ip_ros.robot.trajectory import TrajectoryPoint
 
 @dataclass
 class SimParameters:
-    autostart: bool = param(True, 'configure and activate at start-up; false: wait for '
-                                  'lifecycle transitions')
+    autostart: bool = autostart_param()
     simulated_time: bool = param(True, 'true: ROS time is the simulation time, published on '
                                        '/clock (other nodes: use_sim_time); false: the '
                                        'simulation follows the wall clock')

@@ -29,8 +29,9 @@ def spin_until_shutdown(node, done=None) -> None:
 
 def spin_in_thread(node):
     """Spin ``node`` with its own SingleThreadedExecutor in a daemon thread; returns (executor,
-    thread). One executor per node: on 2 cores, one MultiThreadedExecutor for several nodes
-    slowed an in-process simulation to 0.1-0.25x real time."""
+    thread). One executor per node: a MultiThreadedExecutor shared by several nodes lets their
+    callbacks contend for the GIL and the executor's own bookkeeping, which on a small machine
+    slows an in-process simulation far below real time (README, Benchmarks)."""
     executor = SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
     thread = threading.Thread(target=executor.spin, daemon=True)
