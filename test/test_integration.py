@@ -8,7 +8,6 @@ import math
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -191,10 +190,10 @@ def test_cross_process_one_interaction(setup, tmp_path):
     """The executables as separate processes (as `ros2 run` would start them)."""
     import rclpy
     from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
-    domain = private_domain_id(offset=1)
+    from ros_harness import RosHarness
+    domain = private_domain_id(offset=1)     # apart from the in-process loop's domain
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), OPENBLAS_NUM_THREADS='1',
                ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     bindir = Path(sys.executable).parent
@@ -212,33 +211,25 @@ def test_cross_process_one_interaction(setup, tmp_path):
                                       stderr=open(tmp_path / f'{exe}.log', 'w')))
     ctx = Context()
     rclpy.init(context=ctx, domain_id=domain)
-    node = rclpy.create_node('cross_process_test', context=ctx)
-    joints, posterior = [], []
-    node.create_subscription(JointState, '/joint_states', lambda m: joints.append(m), 10)
-    node.create_subscription(Float64MultiArray, '/estimator/posterior',
-                             lambda m: posterior.append(list(m.data)), 10)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
-
-    def spin_until(cond, timeout):
-        end = time.monotonic() + timeout
-        while time.monotonic() < end and not cond():
-            ex.spin_once(timeout_sec=0.05)
-        return cond()
+    h = RosHarness(ctx)
+    joints = h.subscribe(JointState, '/joint_states')
+    posterior = h.subscribe(Float64MultiArray, '/estimator/posterior')
     try:
         start('sim_node', 'real_time_factor:=1.0')
         start('observer_node', 'use_sim_time:=true')
         start('estimator_node', 'use_sim_time:=true', f'model_path:={setup["model"]}')
-        assert spin_until(lambda: len(joints) > 10, 30), 'no joint states from sim_node'
-        # wait until the estimator is up (its subscription to the observer is matched)
-        assert spin_until(lambda: node.count_subscribers('/observer/wrist') >= 1
-                          and node.count_publishers('/iiwa/joint_trajectory') >= 1, 30)
+        h.spin_until(lambda: len(joints) > 10, what='joint states from sim_node')
+        # the estimator is up: its subscription to the observer is matched
+        h.spin_until(lambda: h.probe.count_subscribers('/observer/wrist') >= 1
+                     and h.probe.count_publishers('/iiwa/joint_trajectory') >= 1,
+                     what='the estimator')
         start('bag_player', 'use_sim_time:=true', 'rewrite_stamps:=true',
               "topics:=['/mocap/wrist']", 'start_delay:=2.0',   # cross-process discovery
               f'bag:={setup["data"] / name}')
-        assert spin_until(lambda: procs[-1].poll() is not None, 60), 'bag_player did not finish'
+        h.spin_until(lambda: procs[-1].poll() is not None, timeout=60,
+                     what='bag_player to finish')
         n = len(joints)
-        spin_until(lambda: len(joints) > n + 150, 20)     # 1.5 s of simulated settling
+        h.spin_until(lambda: len(joints) > n + 150, what='1.5 s of simulated settling')
         q = dict(zip(joints[-1].name, joints[-1].position))
         q = np.array([q[f'iiwa_joint_{i}'] for i in range(1, 8)])
         from mixture_ip_ros.robot.kinematics import IiwaKinematics
@@ -256,6 +247,5 @@ def test_cross_process_one_interaction(setup, tmp_path):
                 p.wait(timeout=10)
             except subprocess.TimeoutExpired:
                 p.kill()
-        ex.shutdown()
-        node.destroy_node()
+        h.close()
         rclpy.try_shutdown(context=ctx)

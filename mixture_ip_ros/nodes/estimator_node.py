@@ -295,9 +295,10 @@ class EstimatorNode(ManagedNode):
                     self.get_logger().warning('onset before the previous interaction ended: '
                                               'starting over')
                 due = self.planner.onset(stamp_to_ns(msg.stamp))
-                self.get_logger().info(f'onset at {msg.stamp.sec}.{msg.stamp.nanosec:09d}: new '
-                                       f'interaction, {self.planner.n_backlog} held '
-                                       'observations to absorb')
+                self.get_logger().info(
+                    f'onset at {msg.stamp.sec}.{msg.stamp.nanosec:09d}: new interaction, '
+                    f'{self.planner.current.n_observations} held observations taken, '
+                    f'{self.planner.n_backlog} still to absorb')
                 if due:
                     self.replan(t0)
             elif kind == 'end':
