@@ -18,7 +18,8 @@ parameters from config/observer.yaml and config/estimator.yaml. The headline run
 min_interval = 0 (every observation used) and replan_rate_hz = 200 (every observation of a 100
 Hz stream replans in its own callback); *_deployed keeps config/estimator.yaml as it is. The
 stream replays demos' recorded 100 Hz wrist samples at their timing plus 0.3 s of rest, 0.5 s
-apart, stamped from a synthetic clock at 1000 s. A short demo is replayed first as warm-up.
+apart, each stamped with the present when it is published. A short demo is replayed first as
+warm-up.
 
 Keys (ms unless named otherwise): e2e_ms_{median,p99,max}[_steady][_deployed|_cross_process]
 (steady: poses published >= 1 s after the onset event reached the probe), end_plan_ms_max,
@@ -67,7 +68,6 @@ from mixture_ip_ros.robot.description import JOINT_NAMES  # noqa: E402
 from mixture_ip_ros.scenarios.generated import MOCAP_NOISE, box_assembly  # noqa: E402
 
 BIN = Path(sys.executable).parent
-BASE_NS = 1000 * 1_000_000_000      # synthetic stamp clock starts at 1000 s
 GAP_S = 0.5                         # stamp and wall pause between replayed interactions
 REST_PAD_S = 0.3                    # extra rest after each demo so every end is confirmed
 STEADY_AFTER_S = 1.0                # poses this long after the onset event: steady state
@@ -101,26 +101,23 @@ def ms_stats(seconds, prefix, suffix=''):
 
 # ---------------------------------------------------------------------------- streams
 class Stream:
-    """Poses to publish: wall offsets (s), stamps (ns), positions."""
+    """Poses to publish: wall offsets (s) and positions (stamped when published)."""
 
-    def __init__(self, start_ns=BASE_NS):
-        self.offsets, self.stamps, self.xyz = [], [], []
-        self.start_ns = start_ns
+    def __init__(self):
+        self.offsets, self.xyz = [], []
 
     def add(self, t, xyz):
         """One interaction's samples, ``t`` seconds from its first sample, after a pause."""
         start = self.offsets[-1] + GAP_S if self.offsets else 0.0
         for ti, p in zip(t.tolist(), xyz.tolist()):
             self.offsets.append(start + ti)
-            self.stamps.append(self.start_ns + round((start + ti) * 1e9))
             self.xyz.append(p)
 
     def messages(self):
         msgs = []
-        for ns, (x, y, z) in zip(self.stamps, self.xyz):
+        for x, y, z in self.xyz:
             m = PoseStamped()
             m.header.frame_id = 'world'
-            m.header.stamp.sec, m.header.stamp.nanosec = ns_to_parts(ns)
             m.pose.position.x, m.pose.position.y, m.pose.position.z = x, y, z
             m.pose.orientation.w = 1.0
             msgs.append(m)
@@ -177,14 +174,18 @@ class Probe(Node):
                 self.diagnostics = {kv.key: kv.value for kv in st.values}
 
     def publish_stream(self, stream, msgs):
-        """Publish at the stream's timing (sleep pacing: releases the GIL); returns the wall
-        times of the first and last publish."""
+        """Publish at the stream's timing (sleep pacing: releases the GIL), each pose stamped
+        with the present on the probe's clock, as a mocap driver does; returns the wall times
+        of the first and last publish."""
         t0 = time.perf_counter() + 0.02
         first = last = None
-        for off, ns, msg in zip(stream.offsets, stream.stamps, msgs):
+        clock = self.get_clock()
+        for off, msg in zip(stream.offsets, msgs):
             wait = t0 + off - time.perf_counter()
             if wait > 0:
                 time.sleep(wait)
+            ns = clock.now().nanoseconds
+            msg.header.stamp.sec, msg.header.stamp.nanosec = ns_to_parts(ns)
             last = time.perf_counter()
             self.pose_pub.publish(msg)
             self.pub_times[ns] = last
@@ -437,16 +438,14 @@ def run_sustained(domain, model_path, warm, g, rates, overrides=None):
             _wait_for(lambda: _discovered(p.probe), 10, 'discovery')
             p.probe.publish_stream(warm, warm.messages())
             p.probe.wait_quiet()
-            next_ns = BASE_NS
             for rate in rates:
-                s = Stream(next_ns)
+                s = Stream()
                 s.add(*padded_wrist(g, seed=1, rate=rate))
-                next_ns = s.stamps[-1] + round(2 * GAP_S * 1e9)
                 ob, counts = p.observer, p.estimator.planner.counts
                 before = (ob.accepted, sum(ob.drop_counts.values()), ob.published['observations'],
                           counts.received, counts.n_rejected)
                 first, last = p.probe.publish_stream(s, s.messages())
-                n = len(s.stamps)
+                n = len(s.xyz)
 
                 def handled():
                     return (ob.accepted + sum(ob.drop_counts.values()) - before[0] - before[1]
@@ -519,10 +518,10 @@ def main():
                   for label in ('plate', 'screw', 'screwdriver')]
         chosen += [g for g in gen if g is not warm_demo and g not in chosen]
         chosen = chosen[:args.demos]
-        stream = Stream(BASE_NS)
+        stream = Stream()
         for i, g in enumerate(chosen):
             stream.add(*padded_wrist(g, seed=i))
-        warm = Stream(BASE_NS - 60_000_000_000)
+        warm = Stream()
         warm.add(*padded_wrist(warm_demo, seed=100))
         result['replayed'] = [f'{g.name}:{g.label}:{g.duration:.2f}s' for g in chosen]
 

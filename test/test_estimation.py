@@ -582,6 +582,7 @@ def test_held_samples_keep_the_window_and_restart_with_the_clock():
 def _observer(**kw):
     from mixture_ip_ros.core.segmentation import MotionSegmenter
     from mixture_ip_ros.estimation.observer import WristObserver
+    kw.setdefault('max_clock_offset', 0.0)     # stamps here are not on any clock
     return WristObserver(MotionSegmenter(), expected_frame='world', **kw)
 
 
@@ -614,5 +615,179 @@ def test_observer_drops_bad_poses_and_takes_a_replayed_stream_as_new():
             obs.on_pose(6, 'world', (0, 0, 1), q, now_ns=1).rejected] == ['stamp_backwards'] * 2
     out = obs.on_pose(7, 'world', (0, 0, 1), q, now_ns=1)      # the third: a new stream
     assert out.rejected is None and out.restarted and obs.counts.stream_restarts == 1
-    assert obs.counts.dropped == {'non_finite': 0, 'bad_quaternion': 1, 'wrong_frame': 1,
-                                  'duplicate_stamp': 1, 'stamp_backwards': 2, 'exception': 0}
+    assert {k: v for k, v in obs.counts.dropped.items() if v} == {
+        'bad_quaternion': 1, 'wrong_frame': 1, 'duplicate_stamp': 1, 'stamp_backwards': 2}
+
+
+# -- is it a person's wrist? -----------------------------------------------------------------
+
+def _reach_stream(rate=100.0, start_ns=1_700_000_000 * 10**9):
+    from mixture_ip_ros.scenarios.human_motion import reach
+    t = np.arange(0.0, 2.5, 1.0 / rate)
+    xyz = reach(t, 0.5, 1.2, (1.2, 0.24, 0.08), (0.85, -0.1, 0.35), via_offset=(0, 0, 0.05))
+    xyz += np.random.default_rng(0).normal(0.0, 0.001, xyz.shape)
+    return start_ns + np.round(t * 1e9).astype(np.int64), xyz
+
+
+def _run(obs, stamps, xyz, inject=None, clock_offset_ns=0):
+    """Feed the stream (the clock reading each stamp + offset); ``inject`` {index: (stamp,
+    position)} adds a pose before the sample. Returns the events and the rejections."""
+    q = (0.0, 0.0, 0.0, 1.0)
+    events, rejected = [], []
+    for i, (ns, p) in enumerate(zip(stamps, xyz)):
+        if inject and i in inject:
+            s, bad = inject[i]
+            out = obs.on_pose(int(s), 'world', bad, q, now_ns=int(ns) + clock_offset_ns)
+            rejected.append(out.rejected)
+            events += out.events
+        out = obs.on_pose(int(ns), 'world', tuple(p), q, now_ns=int(ns) + clock_offset_ns)
+        if out.rejected:
+            rejected.append(out.rejected)
+        events += out.events
+    return events, rejected
+
+
+def test_no_generated_wrist_stream_loses_a_pose_to_the_plausibility_checks():
+    from mixture_ip_ros.core.segmentation import MotionSegmenter
+    from mixture_ip_ros.estimation.observer import WristObserver
+    from mixture_ip_ros.scenarios.generated import box_assembly
+    for g in box_assembly(seed=0):
+        ok = ~np.isnan(g.wrist_xyz).any(axis=1)
+        stamps = 10**18 + np.round(g.wrist_t[ok] * 1e9).astype(np.int64)
+        obs = WristObserver(MotionSegmenter(), expected_frame='world')
+        events, rejected = _run(obs, stamps, g.wrist_xyz[ok])
+        assert rejected == [], g.name
+        assert [k for k, _ in events if k != 'gap'] == ['onset', 'end'], g.name
+
+
+def test_a_pose_no_hand_can_reach_is_dropped_and_the_reach_goes_on():
+    from mixture_ip_ros.core.segmentation import MotionSegmenter
+    from mixture_ip_ros.estimation.observer import WristObserver
+    stamps, xyz = _reach_stream()
+    clean, _ = _run(WristObserver(MotionSegmenter(), expected_frame='world'), stamps, xyz)
+    mid = len(stamps) // 2
+    cases = {
+        'outside_workspace': (xyz[mid] + (100.0, 0.0, 0.0)),       # a reflection 100 m away
+        'implausible_speed': (xyz[mid] + (0.0, 0.4, 0.0)),        # 40 cm in 5 ms
+    }
+    for reason, bad in cases.items():
+        obs = WristObserver(MotionSegmenter(), expected_frame='world')
+        events, rejected = _run(obs, stamps, xyz,
+                                inject={mid: (stamps[mid] - 5_000_000, tuple(bad))})
+        assert rejected == [reason]
+        assert events == clean                  # onset and end untouched
+
+
+def test_an_impossible_acceleration_is_dropped():
+    from mixture_ip_ros.estimation.pose_check import HumanLimits, MotionPlausibility
+    check = MotionPlausibility(HumanLimits())
+    t = np.arange(0.0, 0.2, 0.01)
+    x = 0.0
+    for ti in t:                                   # 3 m/s along x, steadily
+        x = 3.0 * ti
+        assert check.check(ti, (x, 0.0, 0.0)) is None
+        check.accept(ti, (x, 0.0, 0.0))
+    verdicts = []
+    for k in range(1, 8):                          # then back at 3 m/s at once: 600 m/s^2
+        point = (x - 3.0 * 0.01 * k, 0.0, 0.0)
+        verdicts.append(check.check(t[-1] + 0.01 * k, point))
+        if verdicts[-1] is None:
+            check.accept(t[-1] + 0.01 * k, point)
+    assert 'implausible_acceleration' in verdicts
+    assert set(verdicts) <= {None, 'implausible_acceleration'}
+    with pytest.raises(ValueError, match='workspace'):
+        HumanLimits(workspace_min=(0.0, 0.0, 1.0), workspace_max=(1.0, 1.0, 0.0))
+
+
+def test_a_pose_stamped_years_ahead_is_dropped_and_the_stream_keeps_its_time():
+    from mixture_ip_ros.core.segmentation import MotionSegmenter
+    from mixture_ip_ros.estimation.observer import WristObserver
+    stamps, xyz = _reach_stream()
+    clean, _ = _run(WristObserver(MotionSegmenter(), expected_frame='world'), stamps, xyz)
+    year_2038 = 2_150_000_000 * 10**9
+    obs = WristObserver(MotionSegmenter(), expected_frame='world')
+    events, rejected = _run(obs, stamps, xyz, inject={50: (year_2038, tuple(xyz[50]))})
+    assert rejected == ['off_clock'] and events == clean
+
+
+def test_a_stream_on_another_clock_is_dropped_with_one_warning():
+    from mixture_ip_ros.core.segmentation import MotionSegmenter
+    from mixture_ip_ros.estimation.observer import OFF_CLOCK_STREAM, WristObserver
+    stamps, xyz = _reach_stream()
+    obs = WristObserver(MotionSegmenter(), expected_frame='world')
+    warnings = []
+    q = (0.0, 0.0, 0.0, 1.0)
+    for ns, p in zip(stamps, xyz):           # the node's clock: simulated, from 1000 s
+        out = obs.on_pose(int(ns), 'world', tuple(p), q,
+                          now_ns=int(ns - stamps[0]) + 1000 * 10**9)
+        assert out.rejected == 'off_clock' and not out.events
+        if out.warning:
+            warnings.append(out.warning)
+    assert len(warnings) == 1 and '+1.7e+09 s' in warnings[0] and 'another clock' in warnings[0]
+    assert obs.counts.accepted == 0 and obs.counts.dropped['off_clock'] == len(stamps)
+    assert OFF_CLOCK_STREAM < len(stamps)
+
+
+# -- limits are law ---------------------------------------------------------------------------
+
+def _iiwa_limits(acceleration=20.0):
+    from mixture_ip_ros.estimation.plans import JointLimits
+    from mixture_ip_ros.robot.kinematics import IiwaKinematics
+    k = IiwaKinematics()
+    return JointLimits(k.lower, k.upper, k.velocity_limit, np.full(7, acceleration))
+
+
+def test_a_plan_too_fast_for_the_robot_is_slowed_down_along_the_same_path(trained):
+    from mixture_ip_ros.estimation.plans import within_limits
+    model, _, held = trained
+    est = OnlineEstimator(model)
+    _feed(est, held[1], until=0.3 * held[1].duration)
+    plan = build_plan(est, 0.3, n_points=25)
+    slow = _iiwa_limits()
+    slow = type(slow)(slow.lower, slow.upper, 0.25 * np.abs(plan.velocities).max(axis=0) + 1e-9,
+                      np.full(7, 1e3))
+    scaled, why, s = within_limits(plan, slow, 0.3)
+    assert why is None and s == pytest.approx(4.0, rel=1e-6)
+    assert np.all(np.abs(scaled.velocities) <= slow.velocity + 1e-12)
+    np.testing.assert_array_equal(scaled.positions, plan.positions)    # the same path ...
+    np.testing.assert_allclose(scaled.times - 0.3, s * (plan.times - 0.3), rtol=1e-12)
+    np.testing.assert_allclose(scaled.velocities, plan.velocities / s, rtol=1e-12)  # ... slower
+    np.testing.assert_allclose(scaled.accelerations, plan.accelerations / s ** 2, rtol=1e-12)
+    slower = type(slow)(slow.lower, slow.upper, slow.velocity / 2, slow.acceleration)
+    assert within_limits(plan, slower, 0.3)[1].startswith('would have to be 8.0 times slower')
+    assert within_limits(plan, _iiwa_limits(), 0.3) == (plan, None, 1.0)
+
+
+def test_an_outlier_that_reaches_the_estimator_never_reaches_the_joints(trained):
+    """A wrist sample 100 m away (past the observer) conditions the estimate on nonsense: the
+    plan it gives is beyond the joints' limits and is refused, counted, never sent."""
+    model, meta, held = trained
+    demo = held[1]
+    est = OnlineEstimator(model)
+    planner = OnlinePlanner(est, PlannerSettings(), labels=meta['component_labels'],
+                            limits=_iiwa_limits())
+    planner.onset(0)
+    n = len(demo.t) // 2
+    for t, y in zip(demo.t[:n], demo.observed[:n]):
+        planner.observe(_ns(t), y)
+    assert planner.replan().send
+    assert planner.observe(_ns(demo.t[n - 1] + 0.1), demo.observed[n] + 100.0)[0] == 'used'
+    step = planner.replan()
+    assert not step.send and 'beyond its limits' in step.problem
+    assert np.abs(step.plan.positions).max() > 10           # what would have gone out
+    assert planner.counts.plan_refusals['beyond_limits'] == 1
+
+
+def test_a_plan_resting_on_another_clock_is_not_sent(trained):
+    model, meta, held = trained
+    demo = held[1]
+    planner = OnlinePlanner(OnlineEstimator(model), PlannerSettings(max_clock_offset=1.0))
+    onset = 1_700_000_000 * 10**9
+    planner.onset(onset)
+    for t, y in zip(demo.t, demo.observed):
+        planner.observe(onset + _ns(t), y)
+    step = planner.replan(now_ns=onset + _ns(demo.t[-1]) - 10**18)   # a clock ~32 years behind
+    assert not step.send and 'from this node' in step.problem
+    assert planner.counts.plan_refusals == {'invalid': 0, 'beyond_limits': 0, 'off_clock': 1}
+    planner.observe(onset + _ns(demo.t[-1] + 0.01), demo.observed[-1])
+    assert planner.replan(now_ns=onset + _ns(demo.t[-1] + 0.02)).send   # on the clock: sent

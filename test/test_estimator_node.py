@@ -66,6 +66,7 @@ class Estimator:
     """The node in the harness, with publishers of its inputs and recorders of its outputs."""
 
     def __init__(self, harness, model_path, start=True, **params):
+        params.setdefault('max_clock_offset', 0.0)   # ONSET_NS is not the node's clock
         overrides = [Parameter(k, value=v) for k, v in {'model_path': str(model_path),
                                                          **params}.items()]
         self.h = harness

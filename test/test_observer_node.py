@@ -104,6 +104,7 @@ class Observer:
     """The observer in the harness, with a mocap publisher and recorders of its outputs."""
 
     def __init__(self, harness, **params):
+        params.setdefault('max_clock_offset', 0.0)   # T0_NS is not the node's clock
         overrides = [Parameter(k, value=v) for k, v in params.items()]
         self.h = harness
         self.node = harness.add(ObserverNode(context=harness.context,
@@ -123,8 +124,15 @@ class Observer:
         self.h.spin_until(lambda: self.handled() > before, what='pose delivery')
 
 
+def _nonzero(counts):
+    return {k: v for k, v in counts.items() if v}
+
+
+UNCLOCKED = Parameter('max_clock_offset', value=0.0)    # T0_NS is not the node's clock
+
+
 def test_bad_poses_are_dropped_counted_and_the_node_keeps_working(harness):
-    node = harness.add(ObserverNode(context=harness.context))
+    node = harness.add(ObserverNode(context=harness.context, parameter_overrides=[UNCLOCKED]))
     stamps, p, true_on, _ = min_jerk_reach(200)
     node.on_pose(pose_msg(stamps[0], p[0]))
     bad = [
@@ -138,8 +146,9 @@ def test_bad_poses_are_dropped_counted_and_the_node_keeps_working(harness):
     ]
     for msg in bad:
         node.on_pose(msg)
-    assert node.drop_counts == {'non_finite': 1, 'bad_quaternion': 1, 'wrong_frame': 1,
-                                'duplicate_stamp': 1, 'stamp_backwards': 1, 'exception': 1}
+    assert _nonzero(node.drop_counts) == {'non_finite': 1, 'bad_quaternion': 1, 'wrong_frame': 1,
+                                          'duplicate_stamp': 1, 'stamp_backwards': 1,
+                                          'exception': 1}
     assert node.accepted == 2
     for s, x in zip(stamps[2:], p[2:]):
         node.on_pose(pose_msg(s, x))
@@ -150,7 +159,7 @@ def test_bad_poses_are_dropped_counted_and_the_node_keeps_working(harness):
 
 def test_stream_restart_after_consistent_backwards_stamps(harness):
     node = harness.add(ObserverNode(context=harness.context, parameter_overrides=[
-        Parameter('restart_after_backwards', value=5)]))
+        Parameter('restart_after_backwards', value=5), UNCLOCKED]))
     for k in range(10):
         node.on_pose(pose_msg(T0_NS + k * 10_000_000, (0, 0, 1)))
     for k in range(4):  # replay from the start: the first few are dropped ...
@@ -178,9 +187,9 @@ def test_reach_end_to_end_over_dds(harness):
                        what="the 'end' event")
     harness.spin_until(lambda: len(o.points) == o.node.published['observations'],
                        what='all observations')
-    assert o.node.drop_counts == {
+    assert _nonzero(o.node.drop_counts) == {
         'non_finite': 1, 'bad_quaternion': 1, 'wrong_frame': 1, 'duplicate_stamp': 1,
-        'stamp_backwards': 1, 'exception': 0}
+        'stamp_backwards': 1}
     assert o.node.accepted == len(stamps)
 
     # A 'gap' could only come from a >0.1 s stall of this process, never from the data.

@@ -50,9 +50,25 @@ NODE_SCHEMAS = {'estimator_node': 'mixture_ip_ros.nodes.estimator_node:Estimator
 
 def _params(args):
     import importlib
+    import re
     from mixture_ip_ros.nodes.params import markdown_table
-    module, name = NODE_SCHEMAS[args.node].split(':')
-    print(markdown_table(getattr(importlib.import_module(module), name)))
+    nodes = sorted(NODE_SCHEMAS) if args.node == 'all' else [args.node]
+    tables = {}
+    for node in nodes:
+        module, name = NODE_SCHEMAS[node].split(':')
+        tables[node] = markdown_table(getattr(importlib.import_module(module), name))
+    if args.update is None:
+        print('\n\n'.join(tables.values()))
+        return
+    path = Path(args.update)
+    text = path.read_text()
+    for node, table in tables.items():
+        block = re.compile(rf'(<!-- parameters: {node} -->\n).*?(\n<!-- end -->)', re.S)
+        if not block.search(text):
+            raise ValueError(f'{path} has no block <!-- parameters: {node} --> ... <!-- end -->')
+        text = block.sub(lambda m: m.group(1) + table + m.group(2), text)
+    path.write_text(text)
+    print(f'updated the parameter tables of {", ".join(nodes)} in {path}')
 
 
 def _lifecycle(args):
@@ -119,7 +135,10 @@ def build_parser():
     d.set_defaults(func=_demo)
 
     m = sub.add_parser('params', help="a node's parameters as the README's Markdown table")
-    m.add_argument('node', choices=sorted(NODE_SCHEMAS))
+    m.add_argument('node', choices=sorted(NODE_SCHEMAS) + ['all'])
+    m.add_argument('--update', metavar='FILE', default=None,
+                   help='rewrite the tables between <!-- parameters: NODE --> and <!-- end --> '
+                        'in FILE (the README) instead of printing them')
     m.set_defaults(func=_params)
 
     lc = sub.add_parser('lifecycle', help='drive a managed node through its lifecycle services '

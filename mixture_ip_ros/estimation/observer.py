@@ -1,11 +1,15 @@
 """What the observer node decides, without ROS: which mocap poses are usable, the wrist in the
 robot base frame, and the interaction's onset, end and gaps.
 
-Every pose that passes the checks (estimation.pose_check) is forwarded as it comes, before the
-events it settles (core.segmentation). The segmenter runs on the stamps' time (seconds since the
-first accepted pose); silences are judged on the caller's clock (``now_ns``, the node clock), since
-mocap and node clocks may be offset. A stream whose stamps keep going back
-(``restart_after_backwards`` in a row: a bag replayed again, a mocap clock reset) is a new stream.
+A pose is used when the message is well formed, its stamp is within ``max_clock_offset`` of the
+caller's clock (``now_ns``, the node clock: another clock, a pose stamped years ahead, would
+otherwise take over the stream's time), its stamps increase, and it is a person's wrist at all
+(estimation.pose_check.MotionPlausibility: in the workspace, moving and accelerating as a hand
+can). Every used pose is forwarded as it comes, before the events it settles
+(core.segmentation). The segmenter runs on the stamps' time (seconds since the first accepted
+pose); silences are judged on the caller's clock, since mocap and node clocks may be offset. A
+stream whose stamps keep going back (``restart_after_backwards`` in a row: a bag replayed again,
+a mocap clock reset) is a new stream.
 """
 
 from dataclasses import dataclass, field
@@ -13,7 +17,11 @@ from typing import List, Optional, Tuple
 
 from mixture_ip_ros.core.frames import FrameTransform
 from mixture_ip_ros.core.segmentation import Event, MotionSegmenter
-from mixture_ip_ros.estimation.pose_check import POSE_REJECT_REASONS, check_pose
+from mixture_ip_ros.estimation.pose_check import (POSE_REJECT_REASONS, HumanLimits,
+                                                  MotionPlausibility, check_pose)
+
+# Consecutive poses off the clock after which the whole stream is taken to be on another one.
+OFF_CLOCK_STREAM = 10
 
 
 @dataclass
@@ -25,6 +33,7 @@ class ObservedPose:
     point: Optional[Tuple[float, float, float]] = None
     events: List[Tuple[str, int]] = field(default_factory=list)
     restarted: bool = False
+    warning: Optional[str] = None     # once per episode of a stream on another clock
 
 
 @dataclass
@@ -40,9 +49,16 @@ class WristObserver:
 
     def __init__(self, segmenter: MotionSegmenter, transform: FrameTransform = None, *,
                  expected_frame: str = '', quaternion_tolerance: float = 0.01,
-                 restart_after_backwards: int = 50):
+                 restart_after_backwards: int = 50, max_clock_offset: float = 1.0,
+                 limits: HumanLimits = HumanLimits()):
         if not quaternion_tolerance >= 0:
             raise ValueError(f'quaternion_tolerance must be >= 0, got {quaternion_tolerance}')
+        if not max_clock_offset >= 0:
+            raise ValueError(f'max_clock_offset must be >= 0 s, got {max_clock_offset}')
+        self.max_clock_offset_ns = round(max_clock_offset * 1e9)
+        self.plausibility = MotionPlausibility(limits)
+        self.clock_offset = None      # s, stamp minus clock of the latest pose off the clock
+        self._off_clock = 0
         self.segmenter = segmenter
         self.transform = transform if transform is not None else FrameTransform()
         self.expected_frame = expected_frame
@@ -64,13 +80,28 @@ class WristObserver:
         """One pose (position and unit quaternion (x, y, z, w) in the mocap frame)."""
         reason = check_pose(stamp_ns, frame_id, position, orientation_xyzw, self._last_stamp_ns,
                             self.expected_frame, self.quaternion_tolerance)
+        if reason in (None, 'duplicate_stamp', 'stamp_backwards') and self._off(stamp_ns, now_ns):
+            out = self.drop('off_clock')
+            self._off_clock += 1
+            if self._off_clock == OFF_CLOCK_STREAM:
+                out.warning = (f'the last {OFF_CLOCK_STREAM} wrist poses are stamped '
+                               f'{self.clock_offset:+.3g} s from this node\'s clock: is the '
+                               'motion capture on another clock (use_sim_time, time sync)? '
+                               'They are dropped.')
+            return out
         restarted_events = None
         if reason == 'stamp_backwards' and self._restarted():
             restarted_events = self._restart()
             reason = None
         if reason is not None:
             return self.drop(reason)
-        self._backwards = 0
+        point = self.transform.apply(*position)
+        t = (stamp_ns - (stamp_ns if self._t_ref_ns is None else self._t_ref_ns)) * 1e-9
+        reason = self.plausibility.check(t, point)
+        if reason is not None:
+            return self.drop(reason)
+        self.plausibility.accept(t, point)
+        self._backwards = self._off_clock = 0
         if self._t_ref_ns is None:
             self._t_ref_ns = stamp_ns
         self._last_stamp_ns = stamp_ns
@@ -78,11 +109,19 @@ class WristObserver:
         self._last_arrival_ns = now_ns if now_ns > 0 else None
         self.counts.accepted += 1
         self.counts.published['observations'] += 1
-        point = self.transform.apply(*position)
-        events = self._settle(self.segmenter.update((stamp_ns - self._t_ref_ns) * 1e-9, point))
+        events = self._settle(self.segmenter.update(t, point))
         if restarted_events is not None:
             events = restarted_events + events
         return ObservedPose(point=point, events=events, restarted=restarted_events is not None)
+
+    def _off(self, stamp_ns: int, now_ns: int) -> bool:
+        """Whether the stamp is too far from the clock (not judged before the clock runs)."""
+        if self.max_clock_offset_ns <= 0 or now_ns <= 0:
+            return False
+        if abs(stamp_ns - now_ns) <= self.max_clock_offset_ns:
+            return False
+        self.clock_offset = (stamp_ns - now_ns) * 1e-9
+        return True
 
     def on_timer(self, now_ns: int) -> List[Tuple[str, int]]:
         """Events a silence of the stream settles, judged at ``now_ns`` on the caller's clock."""
@@ -116,6 +155,7 @@ class WristObserver:
         if self.moving and last_t is not None:
             events = self._settle([Event('end', last_t)])
         self.segmenter.reset()
+        self.plausibility.reset()
         self.moving = False
         self._t_ref_ns = self._last_stamp_ns = self._last_arrival_ns = None
         self._backwards = 0

@@ -27,8 +27,8 @@ from typing import Optional
 import numpy as np
 
 from mixture_ip_ros.estimation.held import HeldSamples
-from mixture_ip_ros.estimation.plans import (Plan, PosteriorSummary, build_plan, check_plan,
-                                             posterior_summary)
+from mixture_ip_ros.estimation.plans import (JointLimits, Plan, PosteriorSummary, build_plan,
+                                             check_plan, posterior_summary, within_limits)
 from mixture_ip_ros.estimation.records import Interaction, ObservationCounts, Switch
 from mixture_ip_ros.estimation.schedule import ReplanSchedule
 
@@ -46,7 +46,10 @@ def should_commit(component_posterior, n_observations: int, confidence_threshold
 @dataclass(frozen=True)
 class PlannerSettings:
     """How the planner commits, replans and plans. ``replan_period`` is 1 / the replan rate;
-    ``backlog_slice``: held samples conditioned on per call after an onset."""
+    ``backlog_slice``: held samples conditioned on per call after an onset;
+    ``max_clock_offset`` (s, 0 = no check): a plan resting on an observation stamped further
+    than this from the caller's clock is not sent (the observations are on another clock, and
+    the controller would wait for a start years away)."""
 
     confidence_threshold: float = 0.9
     min_observations: int = 3
@@ -58,6 +61,7 @@ class PlannerSettings:
     replan_period: float = 0.1
     replan_on_observation: bool = True
     max_records: int = 1000
+    max_clock_offset: float = 0.0
 
     def __post_init__(self):
         def need(ok, what):
@@ -75,6 +79,8 @@ class PlannerSettings:
         for name in ('settle_time', 'hold_window', 'replan_period'):
             value = getattr(self, name)
             need(np.isfinite(value) and value > 0, f'{name} must be > 0 s, got {value}')
+        need(np.isfinite(self.max_clock_offset) and self.max_clock_offset >= 0,
+             f'max_clock_offset must be >= 0 s, got {self.max_clock_offset}')
 
 
 @dataclass
@@ -103,7 +109,7 @@ class OnlinePlanner:
     """
 
     def __init__(self, estimator, settings: PlannerSettings = PlannerSettings(), *,
-                 labels=None, catch_up_velocity=None):
+                 labels=None, catch_up_velocity=None, limits: Optional[JointLimits] = None):
         if labels is not None and len(labels) != estimator.n_components:
             raise ValueError(f'{len(labels)} component labels for {estimator.n_components} '
                              'components')
@@ -111,6 +117,7 @@ class OnlinePlanner:
         self.labels = None if labels is None else list(labels)
         self.catch_up_velocity = (None if catch_up_velocity is None
                                   else np.asarray(catch_up_velocity, dtype=float))
+        self.limits = limits      # JointLimits: no plan beyond them is ever sent
         self.robot_q = None       # latest robot joints (set by the node), for catching up
         self.state = 'idle'
         self.interactions = []
@@ -333,10 +340,10 @@ class OnlinePlanner:
                           catch_up_velocity=self.catch_up_velocity,
                           final_position=self._y_latest if final else None)
         trigger = self._trigger_ns
-        problem = check_plan(plan)
+        sendable, problem = self._checked(plan, t_plan, trigger, now_ns)
         if problem is not None:
-            self.counts.plan_failures += 1
             return Step(summary, plan, send=False, trigger_ns=trigger, problem=problem)
+        plan = sendable
         committed_now = False
         if self.state == 'observing':
             if self._backlog or not should_commit(summary.probabilities, est.n_observations,
@@ -357,6 +364,27 @@ class OnlinePlanner:
         rec.plans += 1
         return Step(summary, plan, send=True, trigger_ns=trigger, committed_now=committed_now,
                     switched_from=switched_from)
+
+    def _checked(self, plan, t_plan, trigger_ns, now_ns):
+        """(the plan to send, None) or (None, why not), each refusal counted by kind. A plan
+        that only needs slowing down to respect the joint limits is slowed down."""
+        kind, why = 'invalid', check_plan(plan)
+        if why is None and self.limits is not None:
+            kind = 'beyond_limits'
+            scaled, why, scale = within_limits(plan, self.limits, t_plan)
+            if why is None and scale > 1.0:
+                self.counts.plans_time_scaled += 1
+                plan = scaled
+        offset = self._settings.max_clock_offset
+        if why is None and offset > 0 and now_ns is not None and \
+                abs(trigger_ns - int(now_ns)) > round(offset * 1e9):
+            kind = 'off_clock'
+            why = (f'the observations are stamped {(trigger_ns - int(now_ns)) * 1e-9:+.3g} s '
+                   "from this node's clock")
+        if why is None:
+            return plan, None
+        self.counts.plan_refusals[kind] += 1
+        return None, why
 
     def _close(self, reason: str, t_end: Optional[float]) -> None:
         self._backlog.clear()

@@ -14,12 +14,15 @@ human is at rest) the plan is a single point: the predicted final posture, reach
 that time (while it is still ahead) so that the arrival does not recede with every replan.
 """
 
-from dataclasses import dataclass
-from typing import Optional
+from dataclasses import dataclass, replace
+from typing import Optional, Tuple
 
 import numpy as np
 
 PHASE_EPS = 1e-6
+# A plan would have to be slowed down more than this to respect the joint speed limits: it is
+# not the movement that was learned any more, and is refused.
+MAX_TIME_SCALE = 4.0
 
 
 @dataclass(frozen=True)
@@ -163,3 +166,58 @@ def check_plan(plan: Plan) -> Optional[str]:
     if plan.velocities[-1].any() or plan.accelerations[-1].any():
         return 'last point not at rest'
     return None
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """The robot's limits per joint (in the model's joint order): positions ``lower``..``upper``
+    (rad), speeds ``velocity`` (rad/s) and ``acceleration`` (rad/s^2)."""
+
+    lower: np.ndarray
+    upper: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+
+    def __post_init__(self):
+        arrays = [np.asarray(getattr(self, n), dtype=float) for n in
+                  ('lower', 'upper', 'velocity', 'acceleration')]
+        if len({a.shape for a in arrays}) != 1 or arrays[0].ndim != 1:
+            raise ValueError('joint limits must be four arrays of one value per joint')
+        lower, upper, velocity, acceleration = arrays
+        if not (np.all(np.isfinite(arrays)) and np.all(lower < upper)
+                and np.all(velocity > 0) and np.all(acceleration > 0)):
+            raise ValueError('joint limits must be finite, lower < upper, and positive speeds '
+                             'and accelerations')
+        for name, a in zip(('lower', 'upper', 'velocity', 'acceleration'), arrays):
+            object.__setattr__(self, name, a)
+
+
+def within_limits(plan: Plan, limits: JointLimits, t_plan: float) -> Tuple[Optional[Plan],
+                                                                         Optional[str], float]:
+    """The plan made to respect ``limits``: (plan, None, time scale), or (None, why, scale).
+
+    Positions beyond a limit cannot be fixed by timing: the plan is refused. Velocities and
+    accelerations beyond their limits are brought within them by slowing the whole plan down
+    about ``t_plan`` (times stretched by s, velocities divided by s, accelerations by s^2);
+    a plan that would need s > MAX_TIME_SCALE is refused.
+    """
+    if plan.positions.shape[1] != limits.lower.shape[0]:
+        raise ValueError(f'{plan.positions.shape[1]} joints in the plan, '
+                         f'{limits.lower.shape[0]} in the limits')
+    low = plan.positions < limits.lower
+    high = plan.positions > limits.upper
+    if low.any() or high.any():
+        j = int(np.flatnonzero((low | high).any(axis=0))[0])
+        worst = plan.positions[:, j].min() if low[:, j].any() else plan.positions[:, j].max()
+        return None, (f'joint {j + 1} at {worst:.3f} rad, beyond its limits '
+                      f'[{limits.lower[j]:.3f}, {limits.upper[j]:.3f}]'), 1.0
+    scale = max(1.0, float(np.max(np.abs(plan.velocities) / limits.velocity)),
+                float(np.sqrt(np.max(np.abs(plan.accelerations) / limits.acceleration))))
+    if scale > MAX_TIME_SCALE:
+        return None, (f'would have to be {scale:.1f} times slower to respect the joint speed '
+                      f'and acceleration limits'), scale
+    if scale == 1.0:
+        return plan, None, 1.0
+    return replace(plan, times=t_plan + (plan.times - t_plan) * scale,
+                   velocities=plan.velocities / scale,
+                   accelerations=plan.accelerations / scale ** 2), None, scale

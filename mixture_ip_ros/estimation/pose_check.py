@@ -1,15 +1,20 @@
-"""Checks of mocap wrist poses, without ROS (the observer node calls these).
+"""Checks of mocap wrist poses, without ROS (the observer node calls these): is the message
+well formed, and is it a person's wrist at all.
 
 Per-message work is plain float arithmetic: at 500 Hz numpy's per-call overhead on 3-vectors
 would cost more than the math.
 """
 
+from bisect import bisect_right
+from collections import deque
+from dataclasses import dataclass
 import math
 from typing import Optional, Sequence
 
 # Why a pose was dropped; the observer node counts each.
-POSE_REJECT_REASONS = ('non_finite', 'bad_quaternion', 'wrong_frame', 'duplicate_stamp',
-                  'stamp_backwards', 'exception')
+POSE_REJECT_REASONS = ('non_finite', 'bad_quaternion', 'wrong_frame', 'off_clock',
+                       'duplicate_stamp', 'stamp_backwards', 'outside_workspace',
+                       'implausible_speed', 'implausible_acceleration', 'exception')
 
 
 def check_pose(stamp_ns: int, frame_id: str, position: Sequence[float],
@@ -37,3 +42,97 @@ def check_pose(stamp_ns: int, frame_id: str, position: Sequence[float],
         if stamp_ns < last_stamp_ns:
             return 'stamp_backwards'
     return None
+
+
+@dataclass(frozen=True)
+class HumanLimits:
+    """What a person's wrist can do, in the robot base frame.
+
+    People hand objects over and reach at peak wrist speeds of about 1-2 m/s and accelerations
+    of about 10-30 m/s^2 (Flash & Hogan 1985; fast aimed movements a few times more); the
+    defaults, 5 m/s and 100 m/s^2, are far beyond both, so only what no hand does is refused: a
+    marker swapped or lost, a reflection, a corrupt message. ``noise`` is the sensor's position
+    noise per axis (m), allowed for on top; ``window`` the span (s) of the velocities whose
+    change is the acceleration; the workspace is a box in the base frame (m).
+    """
+
+    max_speed: float = 5.0
+    max_acceleration: float = 100.0
+    noise: float = 0.002
+    window: float = 0.05
+    workspace_min: tuple = (-3.0, -3.0, -3.0)
+    workspace_max: tuple = (3.0, 3.0, 3.0)
+
+    def __post_init__(self):
+        for name in ('max_speed', 'max_acceleration', 'window'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f'{name} must be a positive number, got {value}')
+        if not (math.isfinite(self.noise) and self.noise >= 0):
+            raise ValueError(f'noise must be >= 0 m, got {self.noise}')
+        lo, hi = tuple(self.workspace_min), tuple(self.workspace_max)
+        if len(lo) != 3 or len(hi) != 3 or not all(
+                math.isfinite(a) and math.isfinite(b) and a < b for a, b in zip(lo, hi)):
+            raise ValueError(f'the workspace must be a box: 3 finite minima below 3 maxima, got '
+                             f'{list(lo)} .. {list(hi)}')
+
+
+class MotionPlausibility:
+    """Refuses points no person's wrist reaches: outside the workspace, or implied by the last
+    accepted points to move or accelerate beyond :class:`HumanLimits`. Judged against accepted
+    points only, so one outlier never poisons the next; after a silence longer than the window
+    the acceleration is not judged (there is no velocity to compare with)."""
+
+    def __init__(self, limits: HumanLimits = HumanLimits()):
+        self.limits = limits
+        self._recent = deque()   # accepted (t, x, y, z) of the last 3 windows
+        self._times = deque()    # their times, for bisection
+
+    def reset(self) -> None:
+        self._recent.clear()
+        self._times.clear()
+
+    def check(self, t: float, point) -> Optional[str]:
+        """The reason to refuse ``point`` (x, y, z) at ``t`` s, or None; call :meth:`accept`
+        with the points that pass every other check too."""
+        lim = self.limits
+        x, y, z = point
+        if not all(a <= v <= b for a, v, b in zip(lim.workspace_min, (x, y, z),
+                                                   lim.workspace_max)):
+            return 'outside_workspace'
+        if not self._recent:
+            return None
+        t1, x1, y1, z1 = self._recent[-1]
+        dt = t - t1
+        if dt <= 0:
+            return None          # the stamp checks refuse it
+        step = math.sqrt((x - x1) ** 2 + (y - y1) ** 2 + (z - z1) ** 2)
+        if step > lim.max_speed * dt + 6.0 * lim.noise:      # 3 sigma of both points
+            return 'implausible_speed'
+        w = lim.window
+        mid = self._before(t - w) if dt <= w else None
+        first = self._before(mid[0] - w) if mid is not None else None
+        if first is not None:
+            v2 = [(a - b) / (t - mid[0]) for a, b in zip((x, y, z), mid[1:])]
+            v1 = [(a - b) / (mid[0] - first[0]) for a, b in zip(mid[1:], first[1:])]
+            dv = math.sqrt(sum((a - b) ** 2 for a, b in zip(v2, v1)))
+            span = 0.5 * (t - first[0])
+            noise = 4.0 * lim.noise / (w * w)          # of a difference of two velocities
+            if dv / span > lim.max_acceleration + noise:
+                return 'implausible_acceleration'
+        return None
+
+    def accept(self, t: float, point) -> None:
+        recent, times = self._recent, self._times
+        if times and t - times[-1] > self.limits.window:
+            self.reset()         # a silence: velocities start again
+        recent.append((t, *point))
+        times.append(t)
+        while times[0] < t - 3 * self.limits.window - 1e-9:
+            recent.popleft()
+            times.popleft()
+
+    def _before(self, t0):
+        """The last accepted sample at or before ``t0`` (None if none is kept)."""
+        i = bisect_right(self._times, t0 + 1e-9)
+        return self._recent[i - 1] if i else None

@@ -9,6 +9,10 @@ from typing import Optional
 # used, is not a rejection).
 OBSERVATION_REJECT_REASONS = ('wrong_frame', 'non_finite', 'before_onset', 'time_backwards',
                               'exception', 'bad_joint_state')
+# Why a plan was not sent: not a valid trajectory (non-finite, times not increasing, not at rest
+# at the end), beyond the robot's position limits or too fast for it even slowed down, or
+# resting on observations stamped on another clock.
+PLAN_REFUSALS = ('invalid', 'beyond_limits', 'off_clock')
 
 
 def _absolute(onset_ns: int, elapsed: Optional[float]) -> Optional[float]:
@@ -86,11 +90,16 @@ class ObservationCounts:
     skipped: int = 0
     rejected: dict = field(default_factory=lambda: dict.fromkeys(OBSERVATION_REJECT_REASONS, 0))
     plans_sent: int = 0
-    plan_failures: int = 0
+    plan_refusals: dict = field(default_factory=lambda: dict.fromkeys(PLAN_REFUSALS, 0))
+    plans_time_scaled: int = 0          # slowed down to respect the joint limits, then sent
 
     @property
     def n_rejected(self) -> int:
         return sum(self.rejected.values())
+
+    @property
+    def plan_failures(self) -> int:
+        return sum(self.plan_refusals.values())
 
 
 class LatencyStats:

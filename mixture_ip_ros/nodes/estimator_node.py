@@ -108,6 +108,9 @@ class EstimatorParameters:
                                high=100_000)
     marker_rate_hz: float = param(10.0, 'RViz markers per second at most; 0 = none', low=0.0,
                                   high=1000.0)
+    max_clock_offset: float = param(1.0, "s; plans resting on observations stamped further "
+                                         "than this from the node's clock are not sent "
+                                         '(another clock); 0 = no check', low=0.0, high=1e9)
     input_queue_depth: int = param(1000, 'reliable input queues: nothing is lost in a stall',
                                    low=1, high=1_000_000)
     output_queue_depth: int = param(10, 'reliable outputs', low=1, high=100_000)
@@ -230,7 +233,8 @@ class EstimatorNode(ManagedNode):
     def _planner_settings(p, partial=False):
         get = (lambda n: p.get(n)) if partial else (lambda n: getattr(p, n))
         names = ('confidence_threshold', 'min_observations', 'n_points', 'lookahead',
-                 'settle_time', 'hold_window', 'backlog_slice', 'replan_on_observation')
+                 'settle_time', 'hold_window', 'backlog_slice', 'replan_on_observation',
+                 'max_clock_offset')
         values = {n: get(n) for n in names if get(n) is not None}
         if get('replan_rate_hz') is not None:
             values['replan_period'] = 1.0 / get('replan_rate_hz')
@@ -435,7 +439,8 @@ class EstimatorNode(ManagedNode):
             'plan_latency_mean_us': round(self.plan_latency.mean_us, 1),
             'plan_latency_max_us': round(self.plan_latency.max_us, 1),
             'plans_sent': counts.plans_sent,
-            'plan_failures': counts.plan_failures,
+            'plans_time_scaled': counts.plans_time_scaled,
+            **{f'plans_refused_{k}': v for k, v in counts.plan_refusals.items()},
             'events_unknown': self.events['unknown'],
         }
         # WARN while problems are new (since the previous message); totals stay in the values.
@@ -445,7 +450,7 @@ class EstimatorNode(ManagedNode):
         status = DiagnosticStatus(name=DIAGNOSTIC_NAME, hardware_id='mixture_ip_ros')
         if new_failures:
             status.level = DiagnosticStatus.WARN
-            status.message = f'{pl.state}; {new_failures} plans not published (non-finite)'
+            status.message = f'{pl.state}; {new_failures} plans refused'
         elif new_rejected:
             status.level = DiagnosticStatus.WARN
             status.message = f'{pl.state}; {new_rejected} observations rejected'

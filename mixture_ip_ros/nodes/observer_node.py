@@ -6,9 +6,12 @@ Publishes   observation_topic  geometry_msgs/PointStamped in base_frame with the
                                stamps: every accepted pose, as it comes
             event_topic        std_msgs/Header, frame_id 'onset' | 'end' | 'gap', stamp = when
                                (a gap's stamp is the last sample before the silence)
+            /diagnostics       diagnostic_msgs/DiagnosticArray every diagnostics_period s:
+                               poses accepted and dropped by reason, stream restarts
 Both outputs are reliable with a deep queue: the estimator must not lose observations. A pose's
-own observation goes out before the events it settles. Poses that fail a check are dropped and
-counted.
+own observation goes out before the events it settles. Poses that fail a check (malformed, on
+another clock, not a person's wrist: estimation.observer) are dropped and counted; a whole stream
+on another clock is warned about.
 """
 
 from dataclasses import dataclass
@@ -16,6 +19,7 @@ import inspect
 import time
 
 from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseStamped
 from std_msgs.msg import Header
 
@@ -23,6 +27,7 @@ from mixture_ip_ros.core.frames import QUATERNION_TOLERANCE, FrameTransform
 from mixture_ip_ros.core.segmentation import MotionSegmenter
 from mixture_ip_ros.core.stamps import ns_to_parts, stamp_to_ns
 from mixture_ip_ros.estimation.observer import WristObserver
+from mixture_ip_ros.estimation.pose_check import HumanLimits
 from mixture_ip_ros.nodes import qos
 from mixture_ip_ros.nodes.managed import ManagedNode, run_node
 from mixture_ip_ros.nodes.params import autostart_param, finite_list, param, positive
@@ -62,6 +67,24 @@ class ObserverParameters:
                                      check=_unit_quaternion, rule='a unit quaternion')
     quaternion_tolerance: float = param(0.01, '| |q| - 1 | above this drops the pose',
                                         low=0.0, high=1.0)
+    max_clock_offset: float = param(1.0, 's; poses stamped further than this from the node '
+                                         "clock are dropped (another clock); 0 = no check",
+                                    low=0.0, high=1e9)
+    max_hand_speed: float = param(HumanLimits.max_speed, 'm/s a wrist cannot exceed (faster '
+                                                         'implied motion: dropped)',
+                                  low=0.0, high=1000.0, check=positive, rule='> 0')
+    max_hand_acceleration: float = param(HumanLimits.max_acceleration, 'm/s^2 a wrist cannot '
+                                                                       'exceed', low=0.0,
+                                         high=1e6, check=positive, rule='> 0')
+    position_noise: float = param(HumanLimits.noise, "m, the sensor's position noise per axis "
+                                                     '(allowed for in the speed and '
+                                                     'acceleration checks)', low=0.0,
+                                  high=1.0)
+    workspace_min: list = param(list(HumanLimits.workspace_min), 'm; the wrist is in this box '
+                                                                 'of the base frame ...',
+                                check=finite_list(3), rule='3 finite numbers')
+    workspace_max: list = param(list(HumanLimits.workspace_max), '... or dropped',
+                                check=finite_list(3), rule='3 finite numbers above the minima')
     onset_speed: float = _segmenter('onset_speed', 'm/s the wrist must exceed ...',
                                     low=0.0, high=100.0, check=positive, rule='> 0')
     onset_hold: float = _segmenter('onset_hold', '... for this long (s) to confirm an onset',
@@ -93,6 +116,8 @@ class ObserverParameters:
                                     low=0.0, high=3600.0)
     restart_after_backwards: int = param(50, 'consecutive older stamps = the stream restarted '
                                              '(0 = never)', low=0, high=1_000_000)
+    diagnostics_period: float = param(1.0, 's between /diagnostics messages', low=0.001,
+                                      high=3600.0)
 
 
 class ObserverNode(ManagedNode):
@@ -110,13 +135,20 @@ class ObserverNode(ManagedNode):
     def configure(self) -> None:
         p = self.params
         segmenter = MotionSegmenter(**{name: getattr(p, name) for name in SEGMENTER_DEFAULTS})
+        limits = HumanLimits(max_speed=p.max_hand_speed,
+                             max_acceleration=p.max_hand_acceleration, noise=p.position_noise,
+                             workspace_min=tuple(p.workspace_min),
+                             workspace_max=tuple(p.workspace_max))
         self.observer = WristObserver(
             segmenter, FrameTransform(p.mocap_to_base_xyz, p.mocap_to_base_xyzw),
             expected_frame=p.expected_frame, quaternion_tolerance=p.quaternion_tolerance,
-            restart_after_backwards=p.restart_after_backwards)
+            restart_after_backwards=p.restart_after_backwards,
+            max_clock_offset=p.max_clock_offset, limits=limits)
         out = qos.reliable(p.output_queue_depth)
         self._obs_pub = self.create_lifecycle_publisher(PointStamped, p.observation_topic, out)
         self._event_pub = self.create_lifecycle_publisher(Header, p.event_topic, out)
+        self._diag_pub = self.create_lifecycle_publisher(DiagnosticArray, '/diagnostics', out)
+        self._diag_seen = 0
         self.get_logger().info(
             f"observing {p.wrist_topic} (frame {p.expected_frame or 'any'}) -> "
             f'{p.observation_topic} in {p.base_frame}, events on {p.event_topic}')
@@ -125,19 +157,22 @@ class ObserverNode(ManagedNode):
         p = self.params
         self._sub = self.create_subscription(PoseStamped, p.wrist_topic, self.on_pose,
                                              qos.sensor_data(p.input_queue_depth))
-        self._timer = self.create_timer(max(p.gap_timeout / 4.0, 0.005), self.on_timer)
+        self._timers = [self.create_timer(max(p.gap_timeout / 4.0, 0.005), self.on_timer),
+                        self.create_timer(p.diagnostics_period, self.publish_diagnostics)]
 
     def deactivate(self) -> None:
         if self._sub is not None:
             self.destroy_subscription(self._sub)
-            self.destroy_timer(self._timer)
-        self._sub = self._timer = None
+            for timer in self._timers:
+                self.destroy_timer(timer)
+        self._sub, self._timers = None, []
 
     def cleanup(self) -> None:
-        for pub in (getattr(self, '_obs_pub', None), getattr(self, '_event_pub', None)):
+        for name in ('_obs_pub', '_event_pub', '_diag_pub'):
+            pub = getattr(self, name, None)
             if pub is not None:
                 self.destroy_lifecycle_publisher(pub)
-        self._obs_pub = self._event_pub = None
+            setattr(self, name, None)
         self.observer = None
 
     # -- queries (counts since configure) -------------------------------------------------
@@ -169,6 +204,8 @@ class ObserverNode(ManagedNode):
             self.observer.drop('exception')
             self._log_drop(f'wrist pose dropped, callback failed: {exc!r}')
             return
+        if out.warning is not None:
+            self.get_logger().warning(out.warning)
         if out.rejected is not None:
             self._log_drop(f'wrist pose dropped ({out.rejected}, frame '
                            f'{msg.header.frame_id!r}, stamp {stamp.sec}.{stamp.nanosec:09d})')
@@ -190,6 +227,34 @@ class ObserverNode(ManagedNode):
         except Exception as exc:
             self.get_logger().error(f'gap check failed: {exc!r}',
                                     throttle_duration_sec=self.params.log_throttle_sec)
+
+    def publish_diagnostics(self) -> None:
+        try:
+            self._diag_pub.publish(self.diagnostics_msg())
+        except Exception as exc:
+            self.get_logger().error(f'diagnostics failed: {exc!r}',
+                                    throttle_duration_sec=self.params.log_throttle_sec)
+
+    def diagnostics_msg(self) -> DiagnosticArray:
+        counts = self.observer.counts
+        dropped = sum(counts.dropped.values())
+        new = dropped - self._diag_seen
+        self._diag_seen = dropped
+        values = {'accepted': counts.accepted, 'moving': self.observer.moving,
+                  **{f'dropped_{k}': v for k, v in counts.dropped.items()},
+                  **{f'published_{k}': v for k, v in counts.published.items()},
+                  'stream_restarts': counts.stream_restarts,
+                  'clock_offset_s': self.observer.clock_offset}
+        status = DiagnosticStatus(name='observer_node: mocap', hardware_id='mixture_ip_ros')
+        status.level = DiagnosticStatus.WARN if new else DiagnosticStatus.OK
+        status.message = (f'{new} poses dropped since the last report' if new else
+                          'moving' if self.observer.moving else 'at rest')
+        status.values = [KeyValue(key=k, value='' if v is None else str(v))
+                         for k, v in values.items()]
+        msg = DiagnosticArray()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.status = [status]
+        return msg
 
     def _publish_events(self, events) -> None:
         for kind, stamp_ns in events:
