@@ -8,4 +8,10 @@ import os
 for _name in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
     os.environ.setdefault(_name, '1')
 
+# numba caches the compiled kernels next to their source by default: inside an installed
+# package that is a system folder (unwritable, or shared by users). The user's cache instead.
+os.environ.setdefault('NUMBA_CACHE_DIR', os.path.join(
+    os.environ.get('XDG_CACHE_HOME') or os.path.join(os.path.expanduser('~'), '.cache'),
+    'mixture_ip_ros', 'numba'))
+
 __version__ = '0.1.0'

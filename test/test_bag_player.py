@@ -182,6 +182,8 @@ def test_follows_a_simulated_clock_and_holds_while_paused(harness, bag):
     for _ in range(pause_ns // step):  # 0.3 s of simulated time while paused
         advance()
     player.resume()
+    harness.spin_until(lambda: player.paused_total > 0, what='playback to resume')
+    assert player.paused_total * 1e9 == pytest.approx(pause_ns, abs=step)
     while not player.finished:
         advance()
     pb.received(present.sum(), t.size)
@@ -203,3 +205,48 @@ def test_params_file_loads(harness, bag):
     assert player.get_parameter('rate').value == 1.0
     assert player.get_parameter('sensor_data_topics').value == ['/mocap/wrist']
     assert player.paused
+
+
+def _bag_with(path, topic, msgtype, msg):
+    from rosbags.rosbag2 import Writer
+    from mixture_ip_ros.io.bags import typestore
+    ts = typestore()
+    writer = Writer(path, version=9)
+    writer.open()
+    conn = writer.add_connection(topic, msgtype, typestore=ts)
+    writer.write(conn, DEFAULT_START_TIME_NS, ts.serialize_cdr(msg, msgtype))
+    writer.close()
+    return path
+
+
+def test_a_known_topic_stored_as_another_type_is_refused_whole(ros_context, tmp_path):
+    from mixture_ip_ros.io.bags import typestore
+    T = typestore().types
+    point = T['geometry_msgs/msg/PointStamped'](
+        header=T['std_msgs/msg/Header'](stamp=T['builtin_interfaces/msg/Time'](sec=1, nanosec=0),
+                                        frame_id='world'),
+        point=T['geometry_msgs/msg/Point'](x=0.0, y=0.0, z=0.0))
+    path = _bag_with(tmp_path / 'b', '/mocap/wrist', 'geometry_msgs/msg/PointStamped', point)
+    with pytest.raises(BagError, match='/mocap/wrist is stored as geometry_msgs/msg/'
+                                       'PointStamped, expected geometry_msgs/msg/PoseStamped'):
+        BagPlayer(context=ros_context, parameter_overrides=[Parameter('bag', value=str(path))])
+
+
+def test_message_types_come_from_the_type_store_only():
+    from mixture_ip_ros.nodes.bag_player import message_class
+    assert message_class('sensor_msgs/msg/JointState') is JointState
+    for bad in ('os/path/join', 'evil/msg/Thing', 'sensor_msgs/msg/NoSuchType', 'nonsense'):
+        with pytest.raises(ValueError, match='not a ROS 2 Jazzy message type'):
+            message_class(bad)
+
+
+def test_waiting_for_a_clock_that_never_comes_is_warned_about(harness, bag, capfd):
+    pb = Playback(harness, bag[0], use_sim_time=True, clock_warning_period=0.05)
+    pb.player.resume()
+    seen = []
+
+    def warned():
+        seen.append(capfd.readouterr().err)
+        return 'no /clock has come' in ''.join(seen)
+    harness.spin_until(warned, what='the warning')
+    assert pb.player.published == 0

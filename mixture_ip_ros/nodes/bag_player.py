@@ -29,24 +29,27 @@ from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
 
 from mixture_ip_ros.core.stamps import ns_to_parts
-from mixture_ip_ros.io.bags import BagError, read_messages
+from mixture_ip_ros.io.bags import JOINT_TOPIC, JOINT_TYPE, WRIST_TOPIC, WRIST_TYPE, BagError, \
+    read_messages, typestore
 from mixture_ip_ros.nodes import qos
 from mixture_ip_ros.nodes.managed import run_node
 from mixture_ip_ros.nodes.params import declare, param, positive
 
 
 def message_class(msgtype: str):
-    """The rclpy class of 'pkg/msg/Type'; ValueError if that package is not installed."""
-    parts = msgtype.split('/')
-    if len(parts) != 3:
-        raise ValueError(f'message type {msgtype!r} is not of the form pkg/msg/Type')
+    """The rclpy class of 'pkg/msg/Type'. Only types of ROS 2 Jazzy's own message packages (the
+    rosbags type store) are resolved: a type string read from a bag never names a module to
+    import. ValueError otherwise."""
+    if msgtype not in typestore().types:
+        raise ValueError(f'message type {msgtype!r} is not a ROS 2 Jazzy message type')
+    pkg, kind, name = msgtype.split('/')
     try:
-        return getattr(importlib.import_module(f'{parts[0]}.{parts[1]}'), parts[2])
+        return getattr(importlib.import_module(f'{pkg}.{kind}'), name)
     except (ImportError, AttributeError) as exc:
-        raise ValueError(f'message type {msgtype!r} is not available in this ROS 2 installation') from exc
+        raise ValueError(f'message type {msgtype!r} is not installed here') from exc
 
 
-def parse_remaps(entries) -> dict:
+def parse_remaps(entries, what: str = 'remap') -> dict:
     """['/from:=/to', ...] -> {'/from': '/to'}; empty entries are ignored."""
     out = {}
     for entry in entries:
@@ -54,7 +57,7 @@ def parse_remaps(entries) -> dict:
             continue
         src, sep, dst = entry.partition(':=')
         if not sep or not src.strip() or not dst.strip():
-            raise ValueError(f"remap entry {entry!r} is not of the form '/from:=/to'")
+            raise ValueError(f"{what} entry {entry!r} is not of the form 'a:=b'")
         out[src.strip()] = dst.strip()
     return out
 
@@ -86,6 +89,11 @@ class BagPlayerParameters:
                                     'match)', low=0.0, high=3600.0)
     queue_depth: int = param(10, 'history depth of the reliable publishers', low=1,
                              high=1_000_000)
+    clock_warning_period: float = param(5.0, 'use_sim_time: s of waiting for a first /clock '
+                                             'between warnings', low=0.001, high=3600.0)
+    topic_types: list = param([f'{WRIST_TOPIC}:={WRIST_TYPE}', f'{JOINT_TOPIC}:={JOINT_TYPE}'],
+                              "topic:=pkg/msg/Type the bag's topics must have: a bag that "
+                              'stores one of them as another type is refused')
 
 
 class BagPlayer(Node):
@@ -109,10 +117,15 @@ class BagPlayer(Node):
         if not bag:
             raise ValueError("parameter 'bag' (path of the rosbag2 directory) is required")
 
+        expected = parse_remaps(p.topic_types, 'topic_types')
         messages = read_messages(bag, topics=topics or None)
         types = {}
         for m in messages:
             types.setdefault(m.topic, m.msgtype)
+        for topic, msgtype in types.items():
+            if topic in expected and msgtype != expected[topic]:
+                raise BagError(bag, f'topic {topic} is stored as {msgtype}, expected '
+                                    f'{expected[topic]} (parameter topic_types)')
         classes = {topic: message_class(msgtype) for topic, msgtype in types.items()}
         # A message that does not deserialize would break every subscriber: drop it here, counted.
         self.dropped = 0
@@ -143,6 +156,7 @@ class BagPlayer(Node):
         self.published_per_topic = {topic: 0 for topic in classes}
         self.loops_completed = 0
         self.max_lateness = 0.0  # seconds a message went out after it was due
+        self.paused_total = 0.0  # seconds of the pacing clock spent paused during playback
         self._lateness_sum = 0.0
         self.recent_lateness = deque(maxlen=10000)  # per message, seconds (negative = early)
         self.first_sent = self.last_sent = None     # monotonic times of first / last publish
@@ -222,7 +236,9 @@ class BagPlayer(Node):
                     began = self._now()
                     while self._paused and not self._stop:
                         self._cond.wait()
-                    shift[0] += self._now() - began
+                    paused = self._now() - began
+                    shift[0] += paused
+                    self.paused_total += paused
                     continue
                 remaining = due + shift[0] - self._now()
                 if remaining <= 0:
@@ -231,12 +247,19 @@ class BagPlayer(Node):
 
     def _wait_to_start(self) -> bool:
         """Wait while paused and, under use_sim_time, until /clock has been received (the clock
-        reads 0 before). Returns False if asked to stop."""
+        reads 0 before; a warning every clock_warning_period s). Returns False if asked to
+        stop."""
+        warn_at = time.monotonic() + self.params.clock_warning_period
         with self._cond:
             while self._paused or (self._sim_time and self.get_clock().now().nanoseconds == 0):
                 if self._stop:
                     return False
                 self._cond.wait(SIM_POLL if self._sim_time else None)
+                if self._sim_time and not self._paused and time.monotonic() >= warn_at:
+                    warn_at = time.monotonic() + self.params.clock_warning_period
+                    self.get_logger().warning(
+                        'use_sim_time is true but no /clock has come: waiting for the '
+                        'simulation (is sim_node running, on this domain?)')
         return not self._stop
 
     def _stamp_offset_ns(self) -> int:
