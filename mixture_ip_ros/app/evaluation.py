@@ -29,6 +29,8 @@ from mixture_ip_ros.core.interaction import trajectory_distribution
 from mixture_ip_ros.core.mixture import MixtureIProMP, controlled_rms, select_n_components
 from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.app.training import component_labels
+from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE
+from mixture_ip_ros.scenarios.generated import LETTER_OBSERVATION_NOISE
 
 logger = logging.getLogger(__name__)
 
@@ -149,6 +151,11 @@ def load_labelled_bags(bag_dir):
 
 # =========================================================================== shared pieces
 
+def _with_default_noise(config: EvalConfig, observation_noise) -> EvalConfig:
+    """The scenario's observation noise (in its observed DOFs' unit) unless the config sets one."""
+    return replace(config, model={'observation_noise': observation_noise, **config.model})
+
+
 def prepare(demos, subsample: int = 1) -> list:
     """Every ``subsample``-th time step, always keeping the final one (the thesis's observation)."""
     if subsample <= 1:
@@ -185,7 +192,7 @@ def loo_by_components(demos, candidates, folds, model_params, keep_predictions=F
             rms[a, b] = controlled_rms(model, test, 'final')
             if keep_predictions:
                 r = last_observed_row(test)
-                z = test.t / test.duration
+                z = test.phase
                 preds[int(K)].append(model.predict_controlled(z[r:r + 1], test.observed[r:r + 1],
                                                               z)['position'])
     return rms, preds
@@ -231,7 +238,7 @@ def evaluate_box_assembly(demos, out_dir: Path, config: EvalConfig = None) -> di
     """Thesis 3.4.2 plus online selection; see the module docstring. Returns the metrics dict."""
     from mixture_ip_ros.viz import plots
     from mixture_ip_ros.robot.kinematics import IiwaKinematics
-    config = config or box_config()
+    config = _with_default_noise(config or box_config(), WRIST_OBSERVATION_NOISE)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     demos = prepare(demos, config.subsample)
@@ -258,7 +265,7 @@ def evaluate_box_assembly(demos, out_dir: Path, config: EvalConfig = None) -> di
         q_true = kin.fk(test.controlled[-1])[0]
         # Thesis: the final wrist position alone, phase known (z of that sample).
         r = last_observed_row(test)
-        z_obs = np.array([test.t[r] / test.duration])
+        z_obs = np.array([test.phase[r]])
         y_obs = test.observed[r:r + 1]
         post = model.component_posterior(z_obs, y_obs)
         k = int(np.argmax(post))
@@ -339,7 +346,7 @@ def evaluate_pole(demos, out_dir: Path, config: EvalConfig = None) -> dict:
                                               pole_clearance)
     from mixture_ip_ros.robot.scene import POLE_HEIGHT, POLE_RADIUS, POLE_XY
     from mixture_ip_ros.robot.kinematics import IiwaKinematics
-    config = config or pole_config()
+    config = _with_default_noise(config or pole_config(), WRIST_OBSERVATION_NOISE)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     demos = prepare(demos, config.subsample)
@@ -374,7 +381,7 @@ def evaluate_pole(demos, out_dir: Path, config: EvalConfig = None) -> dict:
     single_paths, single_hits, _ = paths_and_hits(preds[1])
     mix_paths, mix_hits, _ = paths_and_hits(preds[K])
     # Side of the pole: sign of the flange's y halfway through (the via point of a demonstration).
-    mid = [int(np.argmin(np.abs(demos[i].t / demos[i].duration - 0.5))) for i in folds]
+    mid = [int(np.argmin(np.abs(demos[i].phase - 0.5))) for i in folds]
 
     def side(paths):
         return np.array([np.sign(p[m, 1] - pole_xy[1]) for p, m in zip(paths, mid)])
@@ -476,7 +483,7 @@ def _by_fraction(fractions, R):
 def evaluate_phase(data, out_dir: Path, config: EvalConfig = None) -> dict:
     """Thesis 4.3.1 (Figs. 16-27): train on 20 letters, complete 20 test letters online."""
     from mixture_ip_ros.viz import plots
-    config = config or letter_config()
+    config = _with_default_noise(config or letter_config(), LETTER_OBSERVATION_NOISE)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     model = MixtureIProMP(n_components=1, method='regression', **config.model).fit(data.train)
@@ -516,7 +523,7 @@ def evaluate_missing_data(data, out_dir: Path, config: EvalConfig = None) -> dic
 
     from mixture_ip_ros.viz import plots
     from mixture_ip_ros.core.promp import observation_stats, ridge_weights, weight_posterior
-    config = config or letter_config()
+    config = _with_default_noise(config or letter_config(), LETTER_OBSERVATION_NOISE)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     models = {m: MixtureIProMP(n_components=1, method=m, **config.model).fit(data.train)
@@ -535,7 +542,7 @@ def evaluate_missing_data(data, out_dir: Path, config: EvalConfig = None) -> dic
     # Figs. 36-37: one training letter as each method reconstructs it from its observed part.
     i = int(np.argmax([np.isnan(tr.observed[:, 0]).mean() for tr in data.train]))
     demo = data.train[i]
-    z = demo.t / demo.duration
+    z = demo.phase
     em = models['em']
     st = observation_stats(em.basis_, z, demo.observed)
     w_em = weight_posterior(st, em.means_[0], linalg.cho_factor(em.covariances_[0], lower=True),

@@ -12,13 +12,39 @@ from scipy.special import logsumexp
 from .basis import GaussianBasis
 
 
-def alpha_prior_from_durations(durations, weights=None, min_rel_std: float = 0.05):
-    """Gaussian prior over alpha = 1/T from training durations (thesis 4.1, below eq. 16)."""
+def alpha_prior(durations, periods=None, resp=None, prior_count: float = 1.0):
+    """Per-component Gaussian prior p(alpha | k) over alpha = 1/T (thesis 4.1, below eq. 16),
+    its spread from the data and the sensor rather than a fixed floor. Returns (mean, std) (K,).
+
+    ``durations`` (n,) seconds, ``periods`` (n,) each demonstration's sample period (None: no
+    timing term), ``resp`` (n, K) responsibilities (None: one component).
+
+    - data: the responsibility-weighted variance of alpha in component k, shrunk towards the
+      variance pooled over components with ``prior_count`` pseudo-demonstrations (a component
+      of one demonstration still has a spread), times (1 + 1/n_k): the predictive spread of a
+      new demonstration's alpha when the mean is itself estimated from n_k of them;
+    - sensor: onset and end are each known to one sample period dt, so T has variance
+      2 dt^2 / 12 and alpha = 1/T the variance alpha^4 dt^2 / 6 (first order).
+    A component without members gets the pooled prior.
+    """
     alphas = 1.0 / np.asarray(durations, dtype=float)
-    w = np.ones_like(alphas) if weights is None else np.asarray(weights, dtype=float)
-    mean = w @ alphas / w.sum()
-    std = np.sqrt(w @ (alphas - mean) ** 2 / w.sum())
-    return float(mean), float(max(std, min_rel_std * mean))
+    n = alphas.size
+    resp = np.ones((n, 1)) if resp is None else np.asarray(resp, dtype=float)
+    timing = (np.zeros(n) if periods is None
+              else alphas ** 4 * np.asarray(periods, dtype=float) ** 2 / 6.0)
+    nk = resp.sum(axis=0)
+    empty = nk < 1e-12
+    nk_safe = np.where(empty, 1.0, nk)
+    mean = np.where(empty, alphas.mean(), resp.T @ alphas / nk_safe)
+    s2 = np.where(empty, alphas.var(), np.einsum('ik,ik->k', resp, (alphas[:, None] - mean) ** 2)
+                  / nk_safe)
+    pooled = float(np.sum(nk * s2) / max(nk.sum(), 1e-12)) if n > 1 else 0.0
+    shrunk = (nk * s2 + prior_count * pooled) / (nk + prior_count)
+    var = shrunk * (1.0 + 1.0 / np.maximum(nk, 1.0))
+    var = var + np.where(empty, timing.mean(), resp.T @ timing / nk_safe)
+    var = np.where(empty, alphas.var() + timing.mean(), var)
+    # Identical durations and no period: a spread of one part in 10^6 keeps the prior proper.
+    return mean, np.sqrt(np.maximum(var, (1e-6 * mean) ** 2))
 
 
 def alpha_grid(alpha_mean, alpha_std, n_alpha: int = 50, n_std: float = 3.0):

@@ -67,7 +67,7 @@ def box_components_and_posterior(path, model, demos, comp_labels, example, n_joi
     zg = np.linspace(0, 1, 100)
     fig, axes = plt.subplots(2, len(dofs), figsize=(2.3 * len(dofs), 5.4), constrained_layout=True)
     for d in demos:
-        z = d.t / d.duration
+        z = d.phase
         Y = np.hstack([d.observed, d.controlled])
         for c, j in enumerate(dofs):
             axes[0, c].plot(z, Y[:, j], color='0.75', lw=0.5, zorder=0)
@@ -95,7 +95,7 @@ def box_components_and_posterior(path, model, demos, comp_labels, example, n_joi
         _, mean, cov = fold_model.condition(z_obs, y_obs, component=k)
         dist = trajectory_distribution(mean, cov, fold_model.basis_, zg, dofs=dofs)
         sd = np.sqrt(np.maximum(np.einsum('tii->ti', dist['position_cov']), 0))
-        z = test.t / test.duration
+        z = test.phase
         Y = np.hstack([test.observed, test.controlled])
         for c, j in enumerate(dofs):
             ax = axes[1, c]
