@@ -471,11 +471,13 @@ def select_n_components(scores, higher_is_better: bool = False, paired: bool = F
 def selection_curve(scores, higher_is_better: bool = False, paired: bool = False):
     """The K choice and its evidence from per-demonstration scores (candidates, n).
 
-    Plateau rule: the smallest K within one standard error of the best K, the standard error
-    of the best K's scores (the thesis's RMS curves) or, ``paired``, of the per-demonstration
-    difference to the best K. Held-out log-likelihoods need the paired form: each
-    demonstration's own level (its number of samples, its noise) varies far more between
-    demonstrations than between K.
+    Plateau rule: the smallest K within one standard error of the best K's scores (the
+    thesis's RMS curves) or, ``paired``, the smallest K not significantly worse than the best:
+    its per-demonstration difference to the best K within two standard errors. Held-out
+    log-likelihoods need the paired form: each demonstration's own level (its number of
+    samples, its noise) varies far more between demonstrations than between K, while the
+    paired differences are so consistent that one standard error would call a negligible
+    gain of a superfluous component significant.
 
     Whether the curve has a clear optimum (paired differences, two standard errors): the chosen
     K beats the first candidate, or the first candidate is chosen and beats every other.
@@ -492,7 +494,7 @@ def selection_curve(scores, higher_is_better: bool = False, paired: bool = False
     se = np.array([se_of(r) for r in s])
     best = int(np.argmax(g.mean(axis=1)))
     if paired:
-        within = [(g[best] - g[a]).mean() <= se_of(g[best] - g[a]) for a in range(len(s))]
+        within = [(g[best] - g[a]).mean() <= 2 * se_of(g[best] - g[a]) for a in range(len(s))]
     else:
         within = g.mean(axis=1) >= g[best].mean() - se[best]
     index = int(np.flatnonzero(within)[0])
