@@ -7,7 +7,7 @@ from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.core.interaction import condition_on_observed, trajectory_distribution
 from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.online import OnlineEstimator
-from mixture_ip_ros.core.phase import (alpha_prior, log_evidence_batch,
+from mixture_ip_ros.core.phase import (alpha_m_step, alpha_prior_std, log_evidence_batch, timing_variance,
                                        phase_posterior_batch)
 
 from mixture_ip_ros.scenarios.synthetic import mixture_demos, random_spd, sample_trajectory
@@ -175,28 +175,25 @@ def test_alpha_map_within_ten_percent_after_forty_percent_observed():
     assert np.mean(hits) >= 0.9
 
 
-def test_alpha_prior_spread_is_the_predictive_spread_plus_the_timing_resolution():
-    # Data: alphas 1 and 0.5, variance 1/16, times (1 + 1/2) for the estimated mean.
-    mean, std = alpha_prior([1.0, 2.0])
-    assert mean[0] == pytest.approx(0.75) and std[0] == pytest.approx(np.sqrt(1.5 / 16))
-    # Sensor: identical durations leave only the sample period: var(alpha) = alpha^4 dt^2 / 6.
-    mean, std = alpha_prior([2.0, 2.0, 2.0], periods=[0.1] * 3)
-    assert std[0] == pytest.approx(np.sqrt(0.5 ** 4 * 0.01 / 6))
-    # Two components: a one-member component borrows the pooled spread (shrinkage, one
-    # pseudo-demonstration); an empty one gets the pooled prior.
-    durations = [1.0, 1.25, 2.0, 4.0]
+def test_alpha_prior_is_the_map_spread_made_predictive_plus_the_timing_resolution():
+    durations = np.array([1.0, 1.25, 2.0, 4.0])
+    a = 1 / durations
     resp = np.array([[1, 0, 0], [1, 0, 0], [0, 1, 0], [0, 1, 0]], dtype=float)
-    resp_one = np.array([[1, 0], [1, 0], [1, 0], [0, 1]], dtype=float)
-    mean, std = alpha_prior(durations, resp=resp)
-    a = 1 / np.array(durations)
-    s2 = np.array([a[:2].var(), a[2:].var()])
-    pooled = s2.mean()
-    expect = (2 * s2 + pooled) / 3 * 1.5
-    assert np.allclose(std[:2] ** 2, expect)
-    assert mean[2] == pytest.approx(a.mean()) and std[2] ** 2 == pytest.approx(a.var())
-    mean, std = alpha_prior(durations, resp=resp_one)
-    s2_0 = a[:3].var()
-    assert std[1] ** 2 == pytest.approx((0 + 3 * s2_0 / 4) / 2 * 2)
+    v0, s = 0.01, 2.0
+    mean, var, nk = alpha_m_step(a, resp, v0, s)
+    assert np.allclose(mean[:2], [a[:2].mean(), a[2:].mean()]) and mean[2] == a.mean()
+    S = np.array([2 * a[:2].var(), 2 * a[2:].var()])
+    assert np.allclose(var[:2], (S + s * v0) / (2 + s)) and var[2] == pytest.approx(v0)
+    # Sensor: onset and end each within a sample: var(alpha) = alpha^4 dt^2 / 6.
+    tv = timing_variance([2.0], [0.1])
+    assert tv[0] == pytest.approx(0.5 ** 4 * 0.01 / 6)
+    std = alpha_prior_std(var, nk, tv[0])
+    assert np.allclose(std[:2] ** 2, var[:2] * 1.5 + tv[0])
+    # Identical durations leave the timing spread, not a fixed 5 % floor.
+    demos = mixture_demos(seed=1, durations=((1.5, 1.5),) * 3)[0]
+    m = MixtureIProMP(3, n_basis=8).fit(demos)
+    assert np.allclose(m.alpha_mean_, 1 / 1.5)
+    assert np.all(m.alpha_std_ < 0.01 * m.alpha_mean_)
 
 
 def test_final_posture_conditions_on_the_final_position_at_phase_one(model_and_demos):

@@ -127,7 +127,7 @@ def build_parser():
 
     e = sub.add_parser('evaluate', help="reproduce the thesis's experiments: plots + metrics.json")
     e.add_argument('--scenario', required=True,
-                   choices=['box_assembly', 'pole', 'phase', 'missing_data'])
+                   choices=['box_assembly', 'pole', 'phase', 'missing_data', 'gestures'])
     e.add_argument('--out', required=True)
     e.add_argument('--seed', type=int, default=0)
     e.add_argument('--quick', action='store_true', help='fewer components/folds (for smoke runs)')

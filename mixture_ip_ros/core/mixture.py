@@ -15,7 +15,8 @@ from scipy.special import logsumexp
 from .basis import GaussianBasis
 from .demonstration import Demonstration
 from .interaction import condition_on_observed, trajectory_distribution
-from .phase import alpha_prior
+from .phase import (alpha_log_density, alpha_m_step, alpha_penalty, alpha_prior_std,
+                    timing_variance)
 from .promp import (LOG_2PI, _regularised_cov, covariance_penalty, expected_sq_residual,
                     observation_stats, weight_posterior)
 
@@ -161,10 +162,18 @@ class MixtureIProMP:
         W = np.array([self._ridge_weights(st) for st in stats])
         n, d = W.shape
         K = self.n_components
+        # A component is a joint p(w, alpha | k) = p(w | k) p(alpha | k) over shape and phase
+        # speed alpha = 1/T (eq. 17's independence of w and alpha within a pattern): patterns
+        # that differ in speed are told apart by it, and p(alpha | k) is the online prior.
+        alphas = np.array([1.0 / demo.duration for demo in demos])
+        timing = timing_variance([demo.duration for demo in demos],
+                                 [float(np.median(np.diff(demo.t))) for demo in demos])
         floor = self.prior_scale * np.maximum(W.var(axis=0), 1e-12)
         if labels is None:
             self.classes_ = None
-            init = kmeans(W / np.sqrt(floor), K, random_state=self.random_state, n_init=self.n_init)
+            a_scale = np.sqrt(self.prior_scale * max(alphas.var(), timing.mean(), 1e-24))
+            init = kmeans(np.column_stack([W / np.sqrt(floor), alphas / a_scale]), K,
+                          random_state=self.random_state, n_init=self.n_init)
         else:
             self.classes_, init = _label_indices(labels, n, K)
         resp = np.eye(K)[init]
@@ -179,7 +188,14 @@ class MixtureIProMP:
             E = W - np.array([W[init == k].mean(axis=0) if np.any(init == k) else W.mean(axis=0)
                               for k in range(K)])[init]
             self.prior_cov_ += E.T @ E / n
+        # The same for alpha: the within-cluster variance pooled over the initial clusters, at
+        # least what the sampling leaves (timing).
+        a_within = alphas - np.array([alphas[init == k].mean() if np.any(init == k)
+                                      else alphas.mean() for k in range(K)])[init]
+        self.alpha_prior_var_ = float(max(np.mean(a_within ** 2), timing.mean(),
+                                          (1e-6 * alphas.mean()) ** 2))
         weights, means, covs = gmm_maximization(W, resp, self.prior_cov_, self.prior_strength)
+        a_mean, a_var, nk = alpha_m_step(alphas, resp, self.alpha_prior_var_, self.prior_strength)
         zero = np.zeros((d, d))
         sq = np.array([expected_sq_residual(st, w, zero) for st, w in zip(stats, W)])  # (n, D)
         m = np.array([st.m for st in stats])                                          # (n, D)
@@ -188,19 +204,22 @@ class MixtureIProMP:
         prev = -np.inf
         self.converged_ = False
         for it in range(self.max_iter):
+            lp_alpha = alpha_log_density(alphas, a_mean, a_var)
             if self.method == 'regression':
+                lp = gmm_log_prob(W, weights, means, covs) + lp_alpha            # eq. 7
                 if labels is None:
-                    resp, ll = gmm_responsibilities(W, weights, means, covs)
+                    norm = logsumexp(lp, axis=1)
+                    resp, ll = np.exp(lp - norm[:, None]), float(norm.sum())
                 else:
-                    ll = float(np.sum(resp * gmm_log_prob(W, weights, means, covs)))
+                    ll = float(np.sum(resp * lp))
                 post_means, post_covs = W, None
             else:
-                r, ll, post_means, post_covs = self._latent_e_step(stats, weights, means, covs,
-                                                                   noise, resp if labels is not None
-                                                                   else None)
-                resp = r
+                resp, ll, post_means, post_covs = self._latent_e_step(
+                    stats, weights, means, covs, noise, lp_alpha,
+                    resp if labels is not None else None)
             ll += sum(covariance_penalty(linalg.cho_factor(c, lower=True), self.prior_cov_,
                                          self.prior_strength) for c in covs)
+            ll += alpha_penalty(a_var, self.alpha_prior_var_, self.prior_strength)
             self.log_likelihood_.append(ll)
             if ll - prev < self.tol * max(1.0, abs(ll)):
                 self.converged_ = True
@@ -208,6 +227,8 @@ class MixtureIProMP:
             prev = ll
             weights, means, covs = gmm_maximization(post_means, resp, self.prior_cov_,
                                                     self.prior_strength, post_covs)
+            a_mean, a_var, nk = alpha_m_step(alphas, resp, self.alpha_prior_var_,
+                                             self.prior_strength)
             if self.method == 'em' and fixed_noise is None:
                 sq = np.einsum('ik,ikj->ij' if self.noise == 'tied' else 'ik,ikj->ikj', resp,
                                np.array([[expected_sq_residual(stats[i], post_means[i, k],
@@ -220,9 +241,10 @@ class MixtureIProMP:
         self.weights_, self.means_, self.covariances_ = weights, means, covs
         self.resp_ = resp
         self.noise_var_ = noise
-        self.alpha_mean_, self.alpha_std_ = alpha_prior(
-            [demo.duration for demo in demos], [float(np.median(np.diff(demo.t))) for demo in demos],
-            resp)
+        self.alpha_mean_ = a_mean
+        self.alpha_var_ = a_var
+        timing_k = np.where(nk > 1e-12, resp.T @ timing / np.maximum(nk, 1e-12), timing.mean())
+        self.alpha_std_ = alpha_prior_std(a_var, nk, timing_k)
         return self
 
     def _check_params(self):
@@ -259,7 +281,7 @@ class MixtureIProMP:
         out = np.where(den > 1e-9, num / np.maximum(den, 1e-9), tied)
         return np.maximum(out, 1e-10)
 
-    def _latent_e_step(self, stats, weights, means, covs, noise, fixed_resp=None):
+    def _latent_e_step(self, stats, weights, means, covs, noise, lp_alpha, fixed_resp=None):
         """E step with latent weights: eqs. 27-28 per (demonstration, component) and eq. 7 with
         each demonstration's marginal likelihood (eq. 21); ``fixed_resp`` keeps the
         responsibilities of a supervised fit (the returned log-likelihood is then the
@@ -273,7 +295,7 @@ class MixtureIProMP:
             nk = noise if noise.ndim == 1 else noise[k]
             for i, st in enumerate(stats):
                 post_means[i, k], post_covs[i, k], ll = weight_posterior(st, means[k], chol, nk)
-                lp[i, k] = np.log(weights[k]) + ll
+                lp[i, k] = np.log(weights[k]) + ll + lp_alpha[i, k]
         if fixed_resp is not None:
             return fixed_resp, float(np.sum(fixed_resp * lp)), post_means, post_covs
         norm = logsumexp(lp, axis=1)
@@ -303,21 +325,27 @@ class MixtureIProMP:
             out[k] = weight_posterior(st, self.means_[k][:do], chol, self._observed_noise(k))[2]
         return out
 
-    def component_posterior(self, z, Y_obs):
-        """Eq. 11: p(k | D) for observations Y_obs (m, P) of the observed agent at phases z."""
+    def component_posterior(self, z, Y_obs, alpha=None):
+        """Eq. 11: p(k | D) for observations Y_obs (m, P) of the observed agent at phases z.
+        With ``alpha`` (1/T, known with the phase) also its evidence p(alpha | k)."""
         self._check_fitted()
         lp = np.log(self.weights_) + self.component_log_evidence(z, Y_obs)
+        if alpha is not None:
+            lp += alpha_log_density([alpha], self.alpha_mean_, self.alpha_std_ ** 2)[0]
         return np.exp(lp - logsumexp(lp))
 
     def score_demonstrations(self, demonstrations):
-        """log p(D_i) of each demonstration's observed agent, phase known (z = t / T): eq. 6 with
-        the marginal likelihood of eq. 21 per component. The held-out criterion for K."""
+        """log p(D_i, alpha_i) of each demonstration's observed agent and phase speed, phase known
+        (z = t / T): eq. 6 over components with the marginal likelihood of eq. 21 and the
+        component's p(alpha | k). The held-out criterion for K."""
         self._check_fitted()
         out = []
         for demo in demonstrations:
             ok = ~np.isnan(demo.observed).any(axis=1)
-            lp = np.log(self.weights_) + self.component_log_evidence(demo.phase[ok],
-                                                                     demo.observed[ok])
+            lp = (np.log(self.weights_)
+                  + self.component_log_evidence(demo.phase[ok], demo.observed[ok])
+                  + alpha_log_density([1.0 / demo.duration], self.alpha_mean_,
+                                      self.alpha_std_ ** 2)[0])
             out.append(float(logsumexp(lp)))
         return np.array(out)
 

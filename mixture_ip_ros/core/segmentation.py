@@ -411,3 +411,64 @@ def segment_motion(t, positions, **params) -> Tuple[float, float]:
         raise ValueError(f'segment_motion: no movement found in {tv.size} valid samples '
                          f'(speed never stayed >= {seg.onset_speed} m/s for {seg.onset_hold} s)')
     return onset, seg.finish()[0].time
+
+
+def sensor_resolution(values) -> float:
+    """The smallest step between distinct values of a recorded signal (its quantisation), NaN
+    ignored; 0 for fewer than two distinct values."""
+    v = np.unique(np.asarray(values, dtype=float)[~np.isnan(values)])
+    d = np.diff(v)
+    d = d[d > 1e-12 * max(1.0, float(np.max(np.abs(v))) if v.size else 1.0)]
+    return float(d.min()) if d.size else 0.0
+
+
+def segment_rest_deviation(t, Y, rest_window: float = 0.1, noise_factor: float = 4.0,
+                           hold: float = 0.05):
+    """Onset and end of a movement recorded between two rests, for signals whose rest is a
+    level (an accelerometer at rest reads gravity) rather than a position at rest with zero
+    speed (:class:`MotionSegmenter`). Any number of DOFs; (onset time, end time).
+
+    Relative to the recording's own rest and sensor, never a fixed threshold: per DOF the rest
+    level is the median of the first ``rest_window`` seconds, its noise the larger of their
+    robust spread (1.4826 MAD) and the sensor's quantisation noise (resolution / sqrt(12), the
+    resolution read off the recorded values). The onset is the first sample that starts
+    ``hold`` seconds of deviation above ``noise_factor`` noise levels (in any DOF), dated back to
+    the last sample within one noise level of rest; it uses only samples up to the confirming
+    one, so an online detector finds the same onset. The end is the same rule on the reversed
+    recording with the rest level of its last ``rest_window`` seconds. A recording without
+    such a deviation at either end is taken whole there (it starts or ends mid-movement).
+    """
+    t = np.asarray(t, dtype=float)
+    Y = np.asarray(Y, dtype=float)
+    if Y.ndim == 1:
+        Y = Y[:, None]
+    if t.ndim != 1 or Y.shape[0] != t.size or t.size < 4:
+        raise ValueError(f'segment_rest_deviation: need at least 4 samples and one row per time, '
+                         f'got t {t.shape}, Y {Y.shape}')
+    if np.any(np.diff(t) <= 0) or not np.all(np.isfinite(t)):
+        raise ValueError('segment_rest_deviation: t must be finite and strictly increasing')
+    if not np.all(np.isfinite(Y)):
+        raise ValueError('segment_rest_deviation: Y contains NaN or Inf')
+    floor = np.array([sensor_resolution(Y[:, j]) for j in range(Y.shape[1])]) / np.sqrt(12.0)
+    period = float(np.median(np.diff(t)))
+    n_rest = max(3, int(round(rest_window / period)))
+    n_hold = max(1, int(round(hold / period)))
+
+    def first_onset(Z):
+        head = Z[:n_rest]
+        level = np.median(head, axis=0)
+        noise = np.maximum(1.4826 * np.median(np.abs(head - level), axis=0), floor)
+        noise = np.where(noise > 0, noise, 1e-12 * np.maximum(1.0, np.abs(level)))
+        dev = np.max(np.abs(Z - level) / noise, axis=1)
+        above = dev > noise_factor
+        run = np.convolve(above, np.ones(n_hold), mode='valid') >= n_hold   # run starting at i
+        if not run.any():
+            return 0
+        i = int(np.argmax(run))
+        calm = np.flatnonzero(dev[:i] <= 1.0)
+        return int(calm[-1]) if calm.size else 0
+    on = first_onset(Y)
+    end = Y.shape[0] - 1 - first_onset(Y[::-1])
+    if end <= on:
+        return float(t[0]), float(t[-1])
+    return float(t[on]), float(t[end])
