@@ -622,13 +622,14 @@ def online_components(model, demo, fractions, n_alpha=50, min_interval=0.05):
 
 
 def phase_known_components(model, demo, fractions):
-    """The most probable component (eq. 11) given the first fractions with z = t / T known."""
+    """The most probable component (eq. 11) given the first fractions with the phase z = t / T
+    known, hence also alpha = 1/T and its evidence p(alpha | k)."""
     out = []
     for f in fractions:
         n = _prefix_length(demo, f)
         ok = ~np.isnan(demo.observed[:n]).any(axis=1)
-        out.append(int(np.argmax(model.component_posterior(demo.phase[:n][ok],
-                                                           demo.observed[:n][ok]))))
+        out.append(int(np.argmax(model.component_posterior(
+            demo.phase[:n][ok], demo.observed[:n][ok], alpha=1.0 / demo.duration))))
     return out
 
 

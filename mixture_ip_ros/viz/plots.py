@@ -354,7 +354,8 @@ def clusters_vs_labels(path, counts, component_names, class_names, title):
     """How the training demonstrations of each class (columns) fall into the unsupervised
     components (rows): a count matrix."""
     counts = np.asarray(counts)
-    fig, ax = plt.subplots(figsize=(1.2 + 0.55 * len(class_names), 1.4 + 0.42 * len(counts)),
+    fig, ax = plt.subplots(figsize=(max(5.0, 1.6 + 0.55 * len(class_names)),
+                                    max(3.2, 1.4 + 0.42 * len(counts))),
                            constrained_layout=True)
     im = ax.imshow(counts, cmap='Blues', aspect='auto')
     for (r, c), v in np.ndenumerate(counts):
