@@ -211,3 +211,33 @@ def test_final_posture_conditions_on_the_final_position_at_phase_one(model_and_d
     gain = C[P:, :P] @ np.linalg.inv(S)
     assert np.allclose(mean, mu[P:] + gain @ (y - mu[:P]), atol=1e-9)
     assert np.allclose(cov, C[P:, P:] - gain @ C[:P, P:], atol=1e-9)
+
+
+def test_decimation_is_counted_and_the_phase_refers_to_the_latest_time_offered(model_and_demos):
+    model, demos, _ = model_and_demos
+    est = OnlineEstimator(model, n_alpha=12, min_interval=0.05)
+    demo = demos[3]
+    used = [est.update(t, y) for t, y in zip(demo.t, demo.observed)]
+    assert est.n_observations == sum(used) and est.n_skipped == len(used) - sum(used)
+    assert est.t_seen == demo.t[-1] and est.t_last <= demo.t[-1]
+    k, a = est.map_hypothesis()
+    assert est.phase() == pytest.approx(min(1.0, a * demo.t[-1]))
+    assert est.phase(0.2) == pytest.approx(min(1.0, a * 0.2))
+
+
+def test_per_component_noise_online_equals_batch_eq18_with_each_components_noise():
+    demos = mixture_demos(seed=2, n_obs=2, n_ctrl=1)[0]
+    model = MixtureIProMP(3, n_basis=8, noise='per_component').fit(demos)
+    assert model.observed_noise_var_.shape == (3, 2)
+    est = OnlineEstimator(model, n_alpha=6, min_interval=0.0)
+    demo = demos[5]
+    idx = np.arange(0, len(demo.t), 7)
+    for i in idx:
+        est.update(demo.t[i], demo.observed[i])
+    do = 2 * model.n_basis
+    for k in range(3):
+        for m in (0, 5):
+            ref = log_evidence_batch(model.means_[k][:do], model.covariances_[k][:do, :do],
+                                     model.basis_, demo.t[idx], demo.observed[idx],
+                                     est.alphas[m], model.observed_noise_var_[k])
+            assert est.log_evidence[k, m] == pytest.approx(ref, rel=1e-8)
