@@ -330,7 +330,7 @@ def accuracy_vs_fraction(path, fractions, curves, levels, title, chance=None):
     """Accuracy of every method vs the fraction of the movement observed. ``curves``: {name:
     accuracies per fraction}; ``levels``: {name: one accuracy} of methods that see the whole
     series (drawn as horizontal lines)."""
-    fig, ax = plt.subplots(figsize=(7.2, 4.6), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(10.5, 4.6), constrained_layout=True)
     markers = 'osd^v<>'
     for i, (name, acc) in enumerate(curves.items()):
         ax.plot(100 * np.asarray(fractions), 100 * np.asarray(acc, dtype=float),
@@ -345,7 +345,7 @@ def accuracy_vs_fraction(path, fractions, curves, levels, title, chance=None):
     ax.set_ylim(0, 100)
     ax.set_xticks(100 * np.asarray(fractions))
     ax.set_title(title, fontsize=10)
-    ax.legend(fontsize=8, loc='lower right', framealpha=0.9)
+    ax.legend(fontsize=8, loc='center left', bbox_to_anchor=(1.01, 0.5))
     ax.grid(alpha=0.3)
     _save(fig, path)
 
@@ -389,7 +389,8 @@ def loglik_vs_k(path, candidates, scores, chosen, title, note=''):
     ax.set_xlabel('number of mixture components K')
     ax.set_ylabel(f'held-out log-likelihood - that of K = {candidates[0]} [nats]')
     ax.set_xticks(list(candidates))
-    ax.set_title(title + (f'\n{note}' if note else ''), fontsize=9)
+    import textwrap
+    ax.set_title('\n'.join([title] + textwrap.wrap(note, 90)), fontsize=9)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     _save(fig, path)
