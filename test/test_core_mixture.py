@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from scipy.stats import multivariate_normal
+from scipy.stats import multivariate_normal, norm
 from sklearn.mixture import GaussianMixture
 
 from mixture_ip_ros.core.basis import GaussianBasis
@@ -68,16 +68,20 @@ def test_mixture_em_is_monotone_and_matches_direct_log_likelihood(three_patterns
         m = MixtureIProMP(3, n_basis=8, method=method, tol=1e-9).fit(demos)
         ll = np.array(m.log_likelihood_)
         assert np.all(np.diff(ll) >= -1e-9 * np.abs(ll[:-1])), method
-    # Direct evaluation of eq. 6 (plus the covariance prior) at the fitted parameters.
+    # Direct evaluation of eq. 6 (plus the covariance priors) at the fitted parameters.
     m = MixtureIProMP(3, n_basis=8, tol=1e-9).fit(demos)
     W = np.array([np.concatenate([np.linalg.solve(
         m.basis_(d.t / d.duration).T @ m.basis_(d.t / d.duration) + 1e-6 * np.eye(8),
         m.basis_(d.t / d.duration).T @ y) for y in np.hstack([d.observed, d.controlled]).T])
         for d in demos])
+    # Each component is joint over shape and phase speed: p(w | k) p(alpha | k).
+    alpha = np.array([1 / d.duration for d in demos])
     dens = sum(m.weights_[k] * multivariate_normal(m.means_[k], m.covariances_[k]).pdf(W)
-               for k in range(3))
+               * norm(m.alpha_mean_[k], np.sqrt(m.alpha_var_[k])).pdf(alpha) for k in range(3))
     penalty = sum(-0.5 * m.prior_strength * (np.trace(m.prior_cov_ @ np.linalg.inv(C))
                                              + np.linalg.slogdet(C)[1]) for C in m.covariances_)
+    penalty += sum(-0.5 * m.prior_strength * (m.alpha_prior_var_ / v + np.log(v))
+                   for v in m.alpha_var_)
     assert m.log_likelihood_[-1] == pytest.approx(np.log(dens).sum() + penalty, rel=1e-8)
 
 

@@ -7,7 +7,7 @@ from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.core.interaction import condition_on_observed, trajectory_distribution
 from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.online import OnlineEstimator
-from mixture_ip_ros.core.phase import (alpha_prior_from_durations, log_evidence_batch,
+from mixture_ip_ros.core.phase import (alpha_m_step, alpha_prior_std, log_evidence_batch, timing_variance,
                                        phase_posterior_batch)
 
 from mixture_ip_ros.scenarios.synthetic import mixture_demos, random_spd, sample_trajectory
@@ -175,9 +175,25 @@ def test_alpha_map_within_ten_percent_after_forty_percent_observed():
     assert np.mean(hits) >= 0.9
 
 
-def test_alpha_prior_from_durations():
-    mean, std = alpha_prior_from_durations([1.0, 2.0])
-    assert mean == pytest.approx(0.75) and std == pytest.approx(0.25)
+def test_alpha_prior_is_the_map_spread_made_predictive_plus_the_timing_resolution():
+    durations = np.array([1.0, 1.25, 2.0, 4.0])
+    a = 1 / durations
+    resp = np.array([[1, 0, 0], [1, 0, 0], [0, 1, 0], [0, 1, 0]], dtype=float)
+    v0, s = 0.01, 2.0
+    mean, var, nk = alpha_m_step(a, resp, v0, s)
+    assert np.allclose(mean[:2], [a[:2].mean(), a[2:].mean()]) and mean[2] == a.mean()
+    S = np.array([2 * a[:2].var(), 2 * a[2:].var()])
+    assert np.allclose(var[:2], (S + s * v0) / (2 + s)) and var[2] == pytest.approx(v0)
+    # Sensor: onset and end each within a sample: var(alpha) = alpha^4 dt^2 / 6.
+    tv = timing_variance([2.0], [0.1])
+    assert tv[0] == pytest.approx(0.5 ** 4 * 0.01 / 6)
+    std = alpha_prior_std(var, nk, tv[0])
+    assert np.allclose(std[:2] ** 2, var[:2] * 1.5 + tv[0])
+    # Identical durations leave the timing spread, not a fixed 5 % floor.
+    demos = mixture_demos(seed=1, durations=((1.5, 1.5),) * 3)[0]
+    m = MixtureIProMP(3, n_basis=8).fit(demos)
+    assert np.allclose(m.alpha_mean_, 1 / 1.5)
+    assert np.all(m.alpha_std_ < 0.01 * m.alpha_mean_)
 
 
 def test_final_posture_conditions_on_the_final_position_at_phase_one(model_and_demos):
@@ -195,3 +211,33 @@ def test_final_posture_conditions_on_the_final_position_at_phase_one(model_and_d
     gain = C[P:, :P] @ np.linalg.inv(S)
     assert np.allclose(mean, mu[P:] + gain @ (y - mu[:P]), atol=1e-9)
     assert np.allclose(cov, C[P:, P:] - gain @ C[:P, P:], atol=1e-9)
+
+
+def test_decimation_is_counted_and_the_phase_refers_to_the_latest_time_offered(model_and_demos):
+    model, demos, _ = model_and_demos
+    est = OnlineEstimator(model, n_alpha=12, min_interval=0.05)
+    demo = demos[3]
+    used = [est.update(t, y) for t, y in zip(demo.t, demo.observed)]
+    assert est.n_observations == sum(used) and est.n_skipped == len(used) - sum(used)
+    assert est.t_seen == demo.t[-1] and est.t_last <= demo.t[-1]
+    k, a = est.map_hypothesis()
+    assert est.phase() == pytest.approx(min(1.0, a * demo.t[-1]))
+    assert est.phase(0.2) == pytest.approx(min(1.0, a * 0.2))
+
+
+def test_per_component_noise_online_equals_batch_eq18_with_each_components_noise():
+    demos = mixture_demos(seed=2, n_obs=2, n_ctrl=1)[0]
+    model = MixtureIProMP(3, n_basis=8, noise='per_component').fit(demos)
+    assert model.observed_noise_var_.shape == (3, 2)
+    est = OnlineEstimator(model, n_alpha=6, min_interval=0.0)
+    demo = demos[5]
+    idx = np.arange(0, len(demo.t), 7)
+    for i in idx:
+        est.update(demo.t[i], demo.observed[i])
+    do = 2 * model.n_basis
+    for k in range(3):
+        for m in (0, 5):
+            ref = log_evidence_batch(model.means_[k][:do], model.covariances_[k][:do, :do],
+                                     model.basis_, demo.t[idx], demo.observed[idx],
+                                     est.alphas[m], model.observed_noise_var_[k])
+            assert est.log_evidence[k, m] == pytest.approx(ref, rel=1e-8)

@@ -84,3 +84,33 @@ def test_a_pickled_array_is_refused(tmp_path, fitted):
     assert zipfile.is_zipfile(path)
     with pytest.raises(ModelFileError, match='not a readable'):
         load_model(path)
+
+
+def test_per_component_noise_units_and_classes_round_trip(tmp_path):
+    from mixture_ip_ros.core.demonstration import Layout
+    from mixture_ip_ros.io.model_file import model_layout
+    demos, labels, _, _ = mixture_demos(seed=4, n_obs=1, n_ctrl=2)
+    model = MixtureIProMP(3, n_basis=8, noise='per_component', observation_noise=[0.002]).fit(
+        demos, labels=np.array(['x', 'y', 'z'])[labels])
+    layout = Layout(('accel_z',), ('a', 'b'), ('g',), ('rad', 'rad'))
+    path = save_model(tmp_path / 'm.npz', model, layout=layout, observed_frame='')
+    loaded, meta = load_model(path)
+    assert model_layout(meta) == layout and loaded.classes_ == ['x', 'y', 'z']
+    assert loaded.noise_var_.shape == (3, 3) and np.array_equal(loaded.noise_var_, model.noise_var_)
+    d = demos[0]
+    assert np.array_equal(loaded.component_posterior(d.phase, d.observed),
+                          model.component_posterior(d.phase, d.observed))
+
+
+def test_a_format_1_file_loads_with_metre_and_radian_units(tmp_path, fitted):
+    path = save_model(tmp_path / 'm.npz', fitted[0], observed_names=OBS, controlled_names=CTRL)
+    meta = json.loads(str(_arrays(path)['metadata']))
+    meta['format_version'] = 1
+    del meta['observed_units'], meta['controlled_units']
+    meta['params'] = {k: v for k, v in meta['params'].items() if k not in ('noise', 'noise_var')}
+    meta['params']['min_alpha_rel_std'] = 0.05        # a parameter format 1 had
+    meta['params']['observation_noise'] = 0.01
+    _rewrite(path, metadata=np.array(json.dumps(meta)))
+    model, meta = load_model(path, observed_names=OBS, controlled_names=CTRL)
+    assert meta['observed_units'] == ['m'] * 3 and meta['controlled_units'] == ['rad'] * 4
+    assert model.observation_noise == 0.01 and model.noise == 'tied'

@@ -228,6 +228,46 @@ def test_onset_never_before_stream_start():
     assert t[late][0] <= onset < true_on + 0.3
 
 
+def wandering(t, speed_lo, speed_hi, rng):
+    """Positions of a hand that never holds still: speed between speed_lo and speed_hi,
+    direction turning slowly."""
+    speed = rng.uniform(speed_lo, speed_hi, t.size)
+    speed = np.convolve(speed, np.ones(15) / 15, mode='same')
+    speed = np.clip(speed, speed_lo, speed_hi)
+    turn = np.cumsum(rng.normal(0, 0.15, t.size))
+    v = speed[:, None] * np.column_stack([np.cos(turn), np.sin(turn), 0.3 * np.sin(2 * turn)])
+    return np.cumsum(v * np.gradient(t)[:, None], axis=0)
+
+
+def test_real_hand_drifting_before_and_hovering_after_is_segmented():
+    """A 120 Hz recording of a handover: the wrist drifts at 4-7 cm/s before the reach (above
+    the 6 cm/s floor) and hovers at 4-8 cm/s after it (never under the 3 cm/s floor); mocap
+    jitter 0.1-0.24 mm. Fixed speeds fire the onset at t = 0 and never see the end."""
+    rng = np.random.default_rng(4)
+    rate, start, duration, tail = 120.0, 1.5, 1.2, 2.0
+    t = np.arange(0.0, start + duration + tail, 1.0 / rate)
+    pre = t < start
+    post = t > start + duration
+    s = min_jerk((t - start) / duration)
+    p = np.outer(s * 0.45, [0.8, 0.5, 0.33])
+    drift = wandering(t, 0.04, 0.07, rng)
+    hover = wandering(t, 0.04, 0.08, rng)
+    p[pre] += drift[pre] - drift[pre][-1]
+    p[post] += hover[post] - hover[post][0]
+    jitter = rng.uniform(0.1e-3, 0.24e-3, t.size)[:, None] * rng.normal(size=(t.size, 3))
+    p += jitter
+    fixed = dict(rest_min=0.0, onset_noise_factor=1e-9, end_noise_factor=1e-10)
+    events = [ev for ev, _ in run_stream(MotionSegmenter(**fixed), t, p)]
+    assert events and events[0].kind == 'onset' and events[0].time < 0.3    # the failure
+    assert 'end' not in [ev.kind for ev in events[:2]] or events[1].time < start
+    seg = MotionSegmenter()
+    events = [ev for ev, _ in run_stream(seg, t, p)]
+    assert [ev.kind for ev in events] == ['onset', 'end'], events
+    assert abs(events[0].time - start) < 0.15
+    assert abs(events[1].time - (start + duration)) < 0.3
+    assert seg.onset_threshold > 0.06 and seg.end_threshold > 0.03
+
+
 def test_invalid_input_is_rejected():
     seg = MotionSegmenter()
     seg.update(0.0, (0, 0, 0))

@@ -15,19 +15,54 @@ def _generate(args):
 
 
 def _train(args):
-    from mixture_ip_ros.io.dataset import load_dataset
     from mixture_ip_ros.app.training import text_progress, train_to_file
-    demos, skipped = load_dataset(args.bag_dir, on_error=args.on_error)
-    for s in skipped:
-        print(f'skipped {s.path}: {s.reason}', file=sys.stderr)
-    kwargs = {'n_basis': args.n_basis, 'method': args.method}
+    if (args.bag_dir is None) == (args.csv is None):
+        raise ValueError('give a folder of bags or --csv DIR (one of them)')
+    kwargs = {'n_basis': args.n_basis, 'method': args.method, 'criterion': args.criterion,
+              'noise': args.noise}
+    if args.observation_noise is not None:
+        kwargs['observation_noise'] = _floats(args.observation_noise, '--observation-noise')
+    if args.csv is not None:
+        from mixture_ip_ros.core.demonstration import Layout
+        from mixture_ip_ros.io.csv_files import load_csv_dataset, parse_names
+        observed = parse_names(args.observed, '--observed')
+        if not observed:
+            raise ValueError('--csv needs --observed NAME[,NAME...] (the observed columns)')
+        controlled = parse_names(args.controlled, '--controlled')
+        layout = Layout(observed, controlled, parse_names(args.observed_units, '--observed-units')
+                        or None, parse_names(args.controlled_units, '--controlled-units') or None)
+        demos = load_csv_dataset(args.csv, layout, time=args.time)
+        kwargs['observed_frame'] = args.frame or ''
+    else:
+        from mixture_ip_ros.io.dataset import load_dataset
+        if args.observed or args.controlled:
+            raise ValueError('--observed/--controlled name CSV columns; bags have the wrist and '
+                             'the robot joints')
+        demos, skipped = load_dataset(args.bag_dir, on_error=args.on_error)
+        for s in skipped:
+            print(f'skipped {s.path}: {s.reason}', file=sys.stderr)
+        layout = None
+        if args.frame:
+            kwargs['observed_frame'] = args.frame
     if args.components:
         kwargs['n_components'] = args.components
     else:
         kwargs['candidates'] = range(1, args.max_components + 1)
-        kwargs['progress'] = text_progress()
-    model, info = train_to_file(demos, args.out, **kwargs)
+        kwargs['progress'] = text_progress(what='choosing K')
+    model, info = train_to_file(demos, args.out, layout=layout, **kwargs)
+    sel = info.get('selection')
+    if sel is not None and not sel['clear_optimum']:
+        print(f"warning: K = {sel['chosen']} by {sel['criterion']}: {sel['note']}",
+              file=sys.stderr)
     print(json.dumps({'model': str(args.out), **info}))
+
+
+def _floats(text, what):
+    try:
+        values = [float(v) for v in str(text).split(',')]
+    except ValueError:
+        raise ValueError(f'{what} must be a number or comma-separated numbers, got {text!r}') from None
+    return values[0] if len(values) == 1 else values
 
 
 def _evaluate(args):
@@ -102,11 +137,34 @@ def build_parser():
     g.add_argument('--storage', choices=['mcap', 'sqlite3'], default='mcap')
     g.set_defaults(func=_generate)
 
-    t = sub.add_parser('train', help='learn a Mixture of Interaction ProMPs from a folder of bags')
-    t.add_argument('bag_dir')
+    t = sub.add_parser('train', help='learn a Mixture of Interaction ProMPs from a folder of bags '
+                                     'or of CSV files (one per demonstration)')
+    t.add_argument('bag_dir', nargs='?', default=None, help='folder of demonstration bags')
+    t.add_argument('--csv', default=None, metavar='DIR',
+                   help='folder of CSV files instead: a time column and named columns; each file '
+                        'is one movement, its first row the onset')
+    t.add_argument('--observed', default=None, help='observed agent columns, e.g. x,y,z (--csv)')
+    t.add_argument('--controlled', default=None,
+                   help='controlled agent columns (--csv; none: a single-agent model)')
+    t.add_argument('--time', default='t', help="time column in seconds (--csv; default 't')")
+    t.add_argument('--observed-units', default=None,
+                   help='unit of each observed column, or one for all, e.g. m (recorded in the model)')
+    t.add_argument('--controlled-units', default=None, help='unit of each controlled column')
+    t.add_argument('--frame', default=None,
+                   help='frame the observed agent is expressed in (recorded in the model; bags: '
+                        'iiwa_link_0)')
     t.add_argument('--out', required=True, help='model file (.npz)')
     t.add_argument('--components', type=int, default=None,
-                   help='number of components (default: leave-one-out over 1..--max-components)')
+                   help='number of components (default: chosen over 1..--max-components)')
+    t.add_argument('--criterion', choices=['auto', 'loo', 'loglik'], default='auto',
+                   help="how K is chosen: 'loo' leave-one-out RMS of the controlled agent (the "
+                        "thesis), 'loglik' cross-validated log-likelihood of the observed agent; "
+                        "'auto' = loo with a controlled agent, else loglik")
+    t.add_argument('--noise', choices=['tied', 'per_component'], default='tied',
+                   help='observation noise per DOF shared by all components (tied) or per component')
+    t.add_argument('--observation-noise', default=None,
+                   help='extra online sensor noise std, one number or one per observed DOF, in '
+                        'their units (default: 0.01 for a wrist in m from bags, else 0)')
     t.add_argument('--max-components', type=int, default=6)
     t.add_argument('--n-basis', type=int, default=15)
     t.add_argument('--method', choices=['regression', 'em'], default='regression',
@@ -116,7 +174,7 @@ def build_parser():
 
     e = sub.add_parser('evaluate', help="reproduce the thesis's experiments: plots + metrics.json")
     e.add_argument('--scenario', required=True,
-                   choices=['box_assembly', 'pole', 'phase', 'missing_data'])
+                   choices=['box_assembly', 'pole', 'phase', 'missing_data', 'gestures'])
     e.add_argument('--out', required=True)
     e.add_argument('--seed', type=int, default=0)
     e.add_argument('--quick', action='store_true', help='fewer components/folds (for smoke runs)')

@@ -8,6 +8,12 @@
 - phase (4.3.1, Figs. 19, 26-27): RMS of the completed letter vs observed fraction, alpha estimate.
 - missing_data (4.3.2, Figs. 36-37, 42-43): EM vs per-trajectory regression from training letters
   with a block of 180 missing samples; EM log-likelihood per iteration.
+- gestures (real human motion, beyond the thesis): PickupGestureWiimoteZ (scenarios.gestures), a
+  single-agent set: who made the gesture, from the first 30/50/70/100 % of it, by the
+  unsupervised mixture (K by held-out log-likelihood, components named by majority over the
+  training labels), phase unknown (online) and known; by the supervised mixture (one component
+  per class); and baselines on the same split in the same run: a per-class ProMP, scikit-learn's
+  GaussianMixture on the same ridge weights, 1-NN DTW.
 
 Everything is leave-one-out (or a separate test set for the letters): a held-out demonstration
 never reaches the model it is tested on. Labels are read for scoring only.
@@ -29,11 +35,14 @@ from mixture_ip_ros.core.interaction import trajectory_distribution
 from mixture_ip_ros.core.mixture import MixtureIProMP, controlled_rms, select_n_components
 from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.app.training import component_labels
+from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE
+from mixture_ip_ros.scenarios.generated import LETTER_OBSERVATION_NOISE
 
 logger = logging.getLogger(__name__)
 
-SCENARIOS = ('box_assembly', 'pole', 'phase', 'missing_data')
+SCENARIOS = ('box_assembly', 'pole', 'phase', 'missing_data', 'gestures')
 REPORT_FRACTIONS = (0.3, 0.5, 0.7)
+GESTURE_FRACTIONS = (0.3, 0.5, 0.7, 1.0)
 
 
 @dataclass
@@ -52,6 +61,7 @@ class EvalConfig:
     fractions: Sequence[float] = tuple(np.round(np.arange(0.05, 1.0001, 0.05), 2))
     n_alpha: int = 50
     min_interval: float = 0.05
+    classes: Optional[Sequence[str]] = None       # a subset of the classes (gestures only)
 
     def to_dict(self):
         d = asdict(self)
@@ -72,6 +82,14 @@ def pole_config(quick: bool = False) -> EvalConfig:
         return EvalConfig(candidates=(1, 2, 4, 6), model={'n_basis': 10}, fold_stride=2,
                           subsample=3)
     return EvalConfig(candidates=tuple(range(1, 13)))
+
+
+def gesture_config(quick: bool = False) -> EvalConfig:
+    """All 10 people, K from 1 to 15; quick: 4 people (20 train / 20 test), K from 1 to 6."""
+    if quick:
+        return EvalConfig(candidates=tuple(range(1, 7)), fractions=GESTURE_FRACTIONS,
+                          classes=('1', '2', '3', '4'))
+    return EvalConfig(candidates=tuple(range(1, 16)), fractions=GESTURE_FRACTIONS)
 
 
 def letter_config(quick: bool = False) -> EvalConfig:
@@ -96,7 +114,7 @@ def evaluate(scenario: str, out_dir: Path, seed: int = 0, quick: bool = False, *
         raise ValueError(f'unknown scenario {scenario!r}; known: {list(SCENARIOS)}')
     if bag_dir is not None and demos is not None:
         raise ValueError('give bag_dir or demos, not both')
-    if scenario in ('phase', 'missing_data') and (bag_dir is not None or demos is not None):
+    if scenario in ('phase', 'missing_data', 'gestures') and (bag_dir is not None or demos is not None):
         raise ValueError(f'scenario {scenario!r} uses generated letters only; '
                          'bag_dir/demos are for box_assembly and pole')
     out_dir = Path(out_dir)
@@ -117,6 +135,14 @@ def evaluate(scenario: str, out_dir: Path, seed: int = 0, quick: bool = False, *
             metrics = evaluate_box_assembly(demos, out_dir, config or box_config(quick))
         else:
             metrics = evaluate_pole(demos, out_dir, config or pole_config(quick))
+    elif scenario == 'gestures':
+        from mixture_ip_ros.scenarios import gestures
+        metrics = evaluate_gestures(
+            gestures.gesture_demonstrations('train'), gestures.gesture_demonstrations('test'),
+            out_dir, config or gesture_config(quick), seed,
+            raw_train=[d.observed[:, 0] for d in gestures.gesture_demonstrations('train', False)],
+            raw_test=[d.observed[:, 0] for d in gestures.gesture_demonstrations('test', False)])
+        source = gestures.SOURCE
     else:
         cfg = config or letter_config(quick)
         if scenario == 'phase':
@@ -148,6 +174,11 @@ def load_labelled_bags(bag_dir):
 
 
 # =========================================================================== shared pieces
+
+def _with_default_noise(config: EvalConfig, observation_noise) -> EvalConfig:
+    """The scenario's observation noise (in its observed DOFs' unit) unless the config sets one."""
+    return replace(config, model={'observation_noise': observation_noise, **config.model})
+
 
 def prepare(demos, subsample: int = 1) -> list:
     """Every ``subsample``-th time step, always keeping the final one (the thesis's observation)."""
@@ -185,7 +216,7 @@ def loo_by_components(demos, candidates, folds, model_params, keep_predictions=F
             rms[a, b] = controlled_rms(model, test, 'final')
             if keep_predictions:
                 r = last_observed_row(test)
-                z = test.t / test.duration
+                z = test.phase
                 preds[int(K)].append(model.predict_controlled(z[r:r + 1], test.observed[r:r + 1],
                                                               z)['position'])
     return rms, preds
@@ -231,7 +262,7 @@ def evaluate_box_assembly(demos, out_dir: Path, config: EvalConfig = None) -> di
     """Thesis 3.4.2 plus online selection; see the module docstring. Returns the metrics dict."""
     from mixture_ip_ros.viz import plots
     from mixture_ip_ros.robot.kinematics import IiwaKinematics
-    config = config or box_config()
+    config = _with_default_noise(config or box_config(), WRIST_OBSERVATION_NOISE)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     demos = prepare(demos, config.subsample)
@@ -258,7 +289,7 @@ def evaluate_box_assembly(demos, out_dir: Path, config: EvalConfig = None) -> di
         q_true = kin.fk(test.controlled[-1])[0]
         # Thesis: the final wrist position alone, phase known (z of that sample).
         r = last_observed_row(test)
-        z_obs = np.array([test.t[r] / test.duration])
+        z_obs = np.array([test.phase[r]])
         y_obs = test.observed[r:r + 1]
         post = model.component_posterior(z_obs, y_obs)
         k = int(np.argmax(post))
@@ -339,7 +370,7 @@ def evaluate_pole(demos, out_dir: Path, config: EvalConfig = None) -> dict:
                                               pole_clearance)
     from mixture_ip_ros.robot.scene import POLE_HEIGHT, POLE_RADIUS, POLE_XY
     from mixture_ip_ros.robot.kinematics import IiwaKinematics
-    config = config or pole_config()
+    config = _with_default_noise(config or pole_config(), WRIST_OBSERVATION_NOISE)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     demos = prepare(demos, config.subsample)
@@ -374,7 +405,7 @@ def evaluate_pole(demos, out_dir: Path, config: EvalConfig = None) -> dict:
     single_paths, single_hits, _ = paths_and_hits(preds[1])
     mix_paths, mix_hits, _ = paths_and_hits(preds[K])
     # Side of the pole: sign of the flange's y halfway through (the via point of a demonstration).
-    mid = [int(np.argmin(np.abs(demos[i].t / demos[i].duration - 0.5))) for i in folds]
+    mid = [int(np.argmin(np.abs(demos[i].phase - 0.5))) for i in folds]
 
     def side(paths):
         return np.array([np.sign(p[m, 1] - pole_xy[1]) for p, m in zip(paths, mid)])
@@ -476,7 +507,7 @@ def _by_fraction(fractions, R):
 def evaluate_phase(data, out_dir: Path, config: EvalConfig = None) -> dict:
     """Thesis 4.3.1 (Figs. 16-27): train on 20 letters, complete 20 test letters online."""
     from mixture_ip_ros.viz import plots
-    config = config or letter_config()
+    config = _with_default_noise(config or letter_config(), LETTER_OBSERVATION_NOISE)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     model = MixtureIProMP(n_components=1, method='regression', **config.model).fit(data.train)
@@ -516,7 +547,7 @@ def evaluate_missing_data(data, out_dir: Path, config: EvalConfig = None) -> dic
 
     from mixture_ip_ros.viz import plots
     from mixture_ip_ros.core.promp import observation_stats, ridge_weights, weight_posterior
-    config = config or letter_config()
+    config = _with_default_noise(config or letter_config(), LETTER_OBSERVATION_NOISE)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     models = {m: MixtureIProMP(n_components=1, method=m, **config.model).fit(data.train)
@@ -535,7 +566,7 @@ def evaluate_missing_data(data, out_dir: Path, config: EvalConfig = None) -> dic
     # Figs. 36-37: one training letter as each method reconstructs it from its observed part.
     i = int(np.argmax([np.isnan(tr.observed[:, 0]).mean() for tr in data.train]))
     demo = data.train[i]
-    z = demo.t / demo.duration
+    z = demo.phase
     em = models['em']
     st = observation_stats(em.basis_, z, demo.observed)
     w_em = weight_posterior(st, em.means_[0], linalg.cho_factor(em.covariances_[0], lower=True),
@@ -568,6 +599,240 @@ def evaluate_missing_data(data, out_dir: Path, config: EvalConfig = None) -> dic
         'config': config.to_dict(),
         'plots': ['missing_data_rms_em_vs_regression.png', 'missing_data_em_loglik.png',
                   'missing_data_reconstruction.png'],
+    }
+
+
+# =========================================================================== gestures
+
+def _prefix_length(demo, fraction) -> int:
+    """Number of samples in the first ``fraction`` of the movement (t <= fraction T), >= 1."""
+    return max(1, int(np.searchsorted(demo.t, fraction * demo.duration + 1e-9, side='right')))
+
+
+def online_components(model, demo, fractions, n_alpha=50, min_interval=0.05):
+    """The most probable component (eq. 12 with the phase marginalised) of the online estimator
+    fed ``demo`` sample by sample, phase unknown, after each fraction of the movement."""
+    est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval)
+    rows = np.flatnonzero(~np.isnan(demo.observed).any(axis=1))
+    out, j = [], 0
+    for f in fractions:
+        j = _feed_until(est, demo, rows, j, f * demo.duration)
+        out.append(int(np.argmax(est.component_posterior())))
+    return out
+
+
+def phase_known_components(model, demo, fractions):
+    """The most probable component (eq. 11) given the first fractions with the phase z = t / T
+    known, hence also alpha = 1/T and its evidence p(alpha | k)."""
+    out = []
+    for f in fractions:
+        n = _prefix_length(demo, f)
+        ok = ~np.isnan(demo.observed[:n]).any(axis=1)
+        out.append(int(np.argmax(model.component_posterior(
+            demo.phase[:n][ok], demo.observed[:n][ok], alpha=1.0 / demo.duration))))
+    return out
+
+
+class PerClassProMP:
+    """Baseline: one ProMP per class by ridge regression (eq. 14), the classes' weight
+    covariances by Ledoit-Wolf shrinkage, one observation noise variance per DOF shared by all
+    classes (pooled residuals); a prefix is scored by eq. 18 with the phase known."""
+
+    def __init__(self, n_basis: int = 15, ridge: float = 1e-6):
+        self.n_basis = n_basis
+        self.ridge = ridge
+
+    def fit(self, demos, labels):
+        from sklearn.covariance import LedoitWolf
+        from mixture_ip_ros.core.basis import GaussianBasis
+        from mixture_ip_ros.core.promp import expected_sq_residual, observation_stats
+        self.basis_ = GaussianBasis(self.n_basis)
+        stats = [observation_stats(self.basis_, d.phase, d.observed) for d in demos]
+        N = self.n_basis
+        W = np.array([np.concatenate([np.linalg.solve(st.G[j] + self.ridge * np.eye(N), st.b[j])
+                                      for j in range(len(st.m))]) for st in stats])
+        zero = np.zeros((W.shape[1], W.shape[1]))
+        sq = sum(expected_sq_residual(st, w, zero) for st, w in zip(stats, W))
+        self.noise_var_ = sq / sum(st.m for st in stats)
+        labels = np.asarray(labels)
+        self.classes_ = sorted(set(labels.tolist()))
+        self.means_ = np.array([W[labels == c].mean(axis=0) for c in self.classes_])
+        self.covariances_ = np.array([LedoitWolf().fit(W[labels == c]).covariance_
+                                      + 1e-9 * np.eye(W.shape[1]) for c in self.classes_])
+        return self
+
+    def predict_prefix(self, demo, fraction):
+        from mixture_ip_ros.core.phase import log_evidence_batch
+        n = _prefix_length(demo, fraction)
+        ok = ~np.isnan(demo.observed[:n]).any(axis=1)
+        t, Y = demo.t[:n][ok], demo.observed[:n][ok]
+        ll = [log_evidence_batch(m, C, self.basis_, t, Y, 1.0 / demo.duration, self.noise_var_)
+              for m, C in zip(self.means_, self.covariances_)]
+        return self.classes_[int(np.argmax(ll))]
+
+
+def sklearn_gmm_accuracy(W_train, labels_train, W_test, labels_test, n_components, seeds):
+    """Baseline: scikit-learn's GaussianMixture (full covariances) on ridge weights with the
+    given K, the best of ``seeds`` by training likelihood, components named by majority over
+    the training labels. Returns (accuracy, the chosen seed)."""
+    from sklearn.mixture import GaussianMixture
+    fits = [GaussianMixture(n_components, covariance_type='full', random_state=int(s)).fit(W_train)
+            for s in seeds]
+    scores = [g.score(W_train) for g in fits]
+    best = int(np.argmax(scores))
+    g = fits[best]
+    names = _majority_names(g.predict(W_train), labels_train, n_components)
+    pred = [names[k] for k in g.predict(W_test)]
+    return float(np.mean(np.asarray(pred) == np.asarray(labels_test))), int(seeds[best])
+
+
+def dtw_1nn_accuracy(train_series, labels_train, test_series, labels_test):
+    """Baseline: 1-nearest-neighbour by dynamic time warping (dtaidistance, unconstrained
+    window, squared differences) on the whole series."""
+    from dtaidistance import dtw
+    tr = [np.ascontiguousarray(s, dtype=np.double) for s in train_series]
+    pred = []
+    for s in test_series:
+        s = np.ascontiguousarray(s, dtype=np.double)
+        d = [dtw.distance_fast(s, x) for x in tr]
+        pred.append(labels_train[int(np.argmin(d))])
+    return float(np.mean(np.asarray(pred) == np.asarray(labels_test)))
+
+
+def _majority_names(assigned, labels, n_components):
+    labels = np.asarray(labels)
+    out = []
+    for k in range(n_components):
+        members = labels[np.asarray(assigned) == k].tolist()
+        out.append(max(sorted(set(members)), key=members.count) if members else None)
+    return out
+
+
+def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None, seed: int = 0,
+                      raw_train=None, raw_test=None) -> dict:
+    """Recognition of who made a gesture from part of it; see the module docstring.
+
+    ``train``/``test``: labelled single-agent Demonstrations (onset to end); ``raw_train``/
+    ``raw_test``: the whole recordings for the DTW baseline (default: the same demonstrations).
+    Labels never reach the unsupervised fit; they name its components afterwards.
+    """
+    from mixture_ip_ros.viz import plots
+    from mixture_ip_ros.core.mixture import heldout_loglik_by_components, selection_curve
+    config = config or gesture_config()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    raw_train = raw_train if raw_train is not None else [d.observed[:, 0] for d in train]
+    raw_test = raw_test if raw_test is not None else [d.observed[:, 0] for d in test]
+    if config.classes is not None:
+        keep = {str(c) for c in config.classes}
+        raw_train = [r for r, d in zip(raw_train, train) if d.label in keep]
+        raw_test = [r for r, d in zip(raw_test, test) if d.label in keep]
+        train = [d for d in train if d.label in keep]
+        test = [d for d in test if d.label in keep]
+    if any(d.label is None for d in train + test):
+        raise ValueError('gesture evaluation needs labelled demonstrations')
+    y_train = np.array([d.label for d in train])
+    y_test = np.array([d.label for d in test])
+    classes = sorted(set(y_train.tolist()), key=lambda c: (len(c), c))
+    fractions = tuple(float(f) for f in config.fractions)
+    keys = [f'{f:g}' for f in fractions]
+    params = dict(config.model)
+    timings = {}
+
+    # Unsupervised: K by the held-out log-likelihood of the observed agent (labels unused).
+    t0 = time.perf_counter()
+    candidates = [int(k) for k in config.candidates if k <= len(train) - len(train) // 5]
+    ll = heldout_loglik_by_components(train, candidates, n_folds=5, fold_seed=seed, **params)
+    curve = selection_curve(ll, higher_is_better=True, paired=True)
+    K = candidates[curve['index']]
+    model = MixtureIProMP(n_components=K, random_state=seed, **params).fit(train)
+    timings['unsupervised_fit_s'] = round(time.perf_counter() - t0, 2)
+    names = majority_labels(model, train)
+
+    def accuracy(pred_rows, truth):
+        P = np.asarray(pred_rows)
+        return {k: float(np.mean(P[:, c] == truth)) for c, k in enumerate(keys)}
+    t0 = time.perf_counter()
+    unsup = accuracy([[names[k] for k in online_components(model, d, fractions, config.n_alpha,
+                                                           config.min_interval)] for d in test],
+                     y_test)
+    unsup_known = accuracy([[names[k] for k in phase_known_components(model, d, fractions)]
+                            for d in test], y_test)
+    timings['unsupervised_test_s'] = round(time.perf_counter() - t0, 2)
+
+    # Supervised: one component per class, tied noise and one covariance prior for all.
+    t0 = time.perf_counter()
+    sup_model = MixtureIProMP(n_components=len(classes), random_state=seed, **params).fit(
+        train, labels=y_train)
+    cls = sup_model.classes_
+    sup = accuracy([[cls[k] for k in online_components(sup_model, d, fractions, config.n_alpha,
+                                                       config.min_interval)] for d in test],
+                   y_test)
+    sup_known = accuracy([[cls[k] for k in phase_known_components(sup_model, d, fractions)]
+                          for d in test], y_test)
+    timings['supervised_s'] = round(time.perf_counter() - t0, 2)
+
+    # Baselines, same split, same run.
+    t0 = time.perf_counter()
+    n_basis = params.get('n_basis', 15)
+    promp = PerClassProMP(n_basis).fit(train, y_train)
+    promp_acc = accuracy([[promp.predict_prefix(d, f) for f in fractions] for d in test], y_test)
+    W_train = model.demonstration_weights(train)
+    W_test = model.demonstration_weights(test)
+    gmm_acc, gmm_seed = sklearn_gmm_accuracy(W_train, y_train, W_test, y_test, K,
+                                             seeds=range(seed, seed + 10))
+    timings['baselines_promp_gmm_s'] = round(time.perf_counter() - t0, 2)
+    t0 = time.perf_counter()
+    dtw_acc = dtw_1nn_accuracy(raw_train, y_train, raw_test, y_test)
+    timings['baseline_dtw_s'] = round(time.perf_counter() - t0, 2)
+
+    assigned = np.argmax(model.resp_, axis=1)
+    counts = np.array([[int(np.sum((assigned == k) & (y_train == c))) for c in classes]
+                       for k in range(K)])
+    chance = 1.0 / len(classes)
+    plots.accuracy_vs_fraction(
+        out_dir / 'gestures_accuracy_vs_fraction.png', fractions,
+        {'mixture, unsupervised, phase unknown (online)': [unsup[k] for k in keys],
+         'mixture, unsupervised, phase known': [unsup_known[k] for k in keys],
+         'mixture, supervised, phase unknown (online)': [sup[k] for k in keys],
+         'per-class ProMP (baseline), phase known': [promp_acc[k] for k in keys]},
+        {f'scikit-learn GMM, K = {K}': gmm_acc, '1-NN DTW': dtw_acc},
+        f'PickupGestureWiimoteZ: who made the gesture ({len(classes)} people, '
+        f'{len(test)} test gestures)', chance=chance)
+    plots.clusters_vs_labels(out_dir / 'gestures_clusters_vs_labels.png', counts,
+                             [n or '-' for n in names], classes,
+                             f'Unsupervised mixture, K = {K}: training gestures per component')
+    plots.loglik_vs_k(out_dir / 'gestures_loglik_vs_k.png', candidates, ll, K,
+                      'Gestures: 5-fold held-out log-likelihood of the observed agent vs K',
+                      curve['note'])
+    return {
+        'n_components_selected': int(K),
+        'unsupervised_accuracy_by_fraction': unsup,
+        'unsupervised_accuracy_phase_known_by_fraction': unsup_known,
+        'supervised_accuracy_by_fraction': sup,
+        'supervised_accuracy_phase_known_by_fraction': sup_known,
+        'baseline_promp_accuracy_by_fraction': promp_acc,
+        'baseline_sklearn_gmm_accuracy': gmm_acc,
+        'baseline_dtw_accuracy': dtw_acc,
+        'k_selection': {'criterion': 'held-out log-likelihood of the observed agent, 5 folds',
+                        'candidates': candidates, 'mean_nats': curve['mean'],
+                        'clear_optimum': curve['clear'], 'note': curve['note']},
+        'component_labels': names,
+        'clusters_vs_labels': {'classes': classes, 'counts': counts.tolist()},
+        'baseline_sklearn_gmm_seed': gmm_seed,
+        'chance_accuracy': chance,
+        'n_train': len(train), 'n_test': len(test), 'n_classes': len(classes),
+        'durations_s': {'train_median': float(np.median([d.duration for d in train])),
+                        'train_range': [float(min(d.duration for d in train)),
+                                        float(max(d.duration for d in train))]},
+        'noise_var': np.asarray(model.noise_var_).tolist(),
+        'units': {'accuracy': 'fraction of test gestures whose person is named correctly',
+                  'fractions': 'part of the movement (onset to end) observed',
+                  'noise_var': 'g^2'},
+        'timings_s': timings,
+        'config': config.to_dict(),
+        'plots': ['gestures_accuracy_vs_fraction.png', 'gestures_clusters_vs_labels.png',
+                  'gestures_loglik_vs_k.png'],
     }
 
 

@@ -1,4 +1,15 @@
-"""Train a Mixture of Interaction ProMPs from demonstrations (arrays or a folder of bags)."""
+"""Train a Mixture of Interaction ProMPs from demonstrations (arrays, CSV files or bags), any
+layout: the observed agent with >= 1 DOF, the controlled agent with >= 0.
+
+K, unless given, is chosen from candidates by two criteria, each a curve over K:
+- the thesis's leave-one-out RMS of the controlled agent given the final observed position
+  (Figs. 8/10), where there is a controlled agent;
+- the cross-validated held-out log-likelihood of the observed agent (phase known), for every
+  layout.
+``criterion='auto'`` decides by leave-one-out where there is a controlled agent (the thesis) and
+by the held-out log-likelihood otherwise; both curves, the choice and whether the deciding curve
+has a clear optimum go into the training summary.
+"""
 
 import logging
 import sys
@@ -6,19 +17,20 @@ from pathlib import Path
 
 import numpy as np
 
-from mixture_ip_ros.core.mixture import (MixtureIProMP, loo_rms_by_components,
-                                         select_n_components)
+from mixture_ip_ros.core.demonstration import Layout
+from mixture_ip_ros.core.mixture import (MixtureIProMP, heldout_loglik_by_components,
+                                         loo_rms_by_components, selection_curve)
+from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE, bag_layout
 from mixture_ip_ros.io.model_file import save_model
-from mixture_ip_ros.robot.description import JOINT_NAMES
 
 logger = logging.getLogger(__name__)
 
-OBSERVED_NAMES = ('wrist_x', 'wrist_y', 'wrist_z')
+CRITERIA = ('auto', 'loo', 'loglik')
 
 
 def choose_n_components(demos, candidates, progress=None, **params):
     """K by leave-one-out (thesis Figs. 8/10): RMS of the held-out controlled trajectory given
-    its final wrist position, for every candidate K; the plateau's first K is chosen.
+    its final observed position, for every candidate K; the plateau's first K is chosen.
 
     Returns (K, rms) with rms of shape (len(candidates), n_demos).
     """
@@ -26,15 +38,15 @@ def choose_n_components(demos, candidates, progress=None, **params):
     if not candidates:
         raise ValueError('not enough demonstrations for leave-one-out')
     rms = loo_rms_by_components(demos, candidates, 'final', progress, **params)
-    return candidates[select_n_components(rms)], rms
+    return candidates[selection_curve(rms)['index']], rms
 
 
-def text_progress(stream=sys.stderr):
-    """A one-line progress bar for choose_n_components."""
+def text_progress(stream=sys.stderr, what='leave-one-out'):
+    """A one-line progress bar for the K curves."""
     def show(done, total, K):
         width = 30
         filled = int(width * done / total)
-        stream.write(f'\rleave-one-out K={K:<2d} [{"#" * filled}{"." * (width - filled)}] '
+        stream.write(f'\r{what} K={K:<2d} [{"#" * filled}{"." * (width - filled)}] '
                      f'{done}/{total}')
         if done == total:
             stream.write('\n')
@@ -42,21 +54,75 @@ def text_progress(stream=sys.stderr):
     return show
 
 
-def train(demos, *, n_components=None, candidates=range(1, 7), progress=None, **params):
-    """Fit the mixture; K given or chosen by leave-one-out. Returns (model, info dict)."""
-    info = {'n_demonstrations': len(demos)}
+def _curve_summary(candidates, scores, curve):
+    return {'candidates': list(candidates), 'mean': curve['mean'],
+            'std': np.asarray(scores).std(axis=1).tolist(), 'se': curve['se'],
+            'chosen': int(candidates[curve['index']]), 'clear_optimum': curve['clear'],
+            'note': curve['note']}
+
+
+def train(demos, *, n_components=None, candidates=range(1, 7), criterion: str = 'auto',
+          n_folds: int = 5, progress=None, labels=None, **params):
+    """Fit the mixture; K given, or chosen by ``criterion`` ('auto', 'loo', 'loglik'; see the
+    module docstring). ``labels`` makes a supervised fit (one component per class, K = number
+    of classes). ``params`` go to MixtureIProMP. Returns (model, info dict): info['selection']
+    holds every curve computed, the criterion, the chosen K and whether its curve has a clear
+    optimum (a flat curve is reported as such, never silently read as K = 1).
+    """
+    demos = list(demos)
+    if criterion not in CRITERIA:
+        raise ValueError(f'criterion must be one of {CRITERIA}, got {criterion!r}')
+    if not demos:
+        raise ValueError('no demonstrations to train on')
+    has_controlled = demos[0].n_controlled_dofs > 0
+    info = {'n_demonstrations': len(demos), 'n_observed_dofs': demos[0].n_observed_dofs,
+            'n_controlled_dofs': demos[0].n_controlled_dofs}
+    if labels is not None:
+        n_components = len(set(labels))
+        info['supervised'] = True
     if n_components is None:
-        # Leave-one-out on per-demonstration regression fits (0.03 s each on the box data):
-        # an EM fit takes 10-30 s, and leave-one-out needs one per demonstration and
-        # candidate K (hours). The final model below is fitted with the method asked for.
-        n_components, rms = choose_n_components(demos, candidates, progress,
-                                                 **{**params, 'method': 'regression'})
-        info['loo_method'] = 'regression'
-        info['loo_candidates'] = [int(k) for k in candidates if k <= len(demos) - 1]
-        info['loo_rms_mean'] = rms.mean(axis=1).tolist()
-        info['loo_rms_std'] = rms.std(axis=1).tolist()
-    model = MixtureIProMP(n_components=n_components, **params).fit(demos)
+        if criterion == 'auto':
+            criterion = 'loo' if has_controlled else 'loglik'
+        if criterion == 'loo' and not has_controlled:
+            raise ValueError("criterion 'loo' needs a controlled agent; these demonstrations have "
+                             "none (use 'loglik')")
+        # The curves use per-demonstration regression fits (0.03 s each on the box data): an EM
+        # fit takes 10-30 s, and leave-one-out needs one per demonstration and candidate K
+        # (hours). The final model below is fitted with the method asked for.
+        curve_params = {**params, 'method': 'regression'}
+        selection = {'criterion': criterion}
+        if has_controlled:
+            loo_candidates = [int(k) for k in candidates if k <= len(demos) - 1]
+            if not loo_candidates:
+                raise ValueError('not enough demonstrations for leave-one-out')
+            rms = loo_rms_by_components(demos, loo_candidates, 'final',
+                                        progress if criterion == 'loo' else None, **curve_params)
+            selection['loo_rms'] = _curve_summary(loo_candidates, rms, selection_curve(rms))
+            info['loo_method'] = 'regression'
+            info['loo_candidates'] = loo_candidates
+            info['loo_rms_mean'] = rms.mean(axis=1).tolist()
+            info['loo_rms_std'] = rms.std(axis=1).tolist()
+        n_train = len(demos) - int(np.ceil(len(demos) / min(n_folds, len(demos))))
+        ll_candidates = [int(k) for k in candidates if k <= n_train]
+        if not ll_candidates:
+            raise ValueError(f'not enough demonstrations for {n_folds}-fold cross-validation')
+        ll = heldout_loglik_by_components(demos, ll_candidates, n_folds,
+                                          progress if criterion == 'loglik' else None,
+                                          **curve_params)
+        selection['heldout_loglik'] = {
+            **_curve_summary(ll_candidates, ll, selection_curve(ll, higher_is_better=True,
+                                                               paired=True)),
+            'n_folds': int(min(n_folds, len(demos))), 'unit': 'nats per demonstration'}
+        chosen = selection['loo_rms' if criterion == 'loo' else 'heldout_loglik']
+        n_components = chosen['chosen']
+        selection.update(chosen=int(n_components), clear_optimum=chosen['clear_optimum'],
+                         note=chosen['note'])
+        if not chosen['clear_optimum']:
+            logger.warning('K = %d by %s, but %s', n_components, criterion, chosen['note'])
+        info['selection'] = selection
+    model = MixtureIProMP(n_components=n_components, **params).fit(demos, labels=labels)
     info['n_components'] = int(n_components)
+    info['noise_var'] = np.asarray(model.noise_var_).tolist()
     return model, info
 
 
@@ -72,9 +138,28 @@ def component_labels(model, demos):
     return out
 
 
-def train_to_file(demos, out_path, **kwargs):
+def default_layout(demos) -> Layout:
+    """The wrist (3, m) + robot joints (rad) layout of bag demonstrations; any other layout
+    must be named (a model file records every DOF's name and unit)."""
+    layout = bag_layout()
+    d = demos[0]
+    if (d.n_observed_dofs, d.n_controlled_dofs) != (len(layout.observed), len(layout.controlled)):
+        raise ValueError(f'demonstrations with {d.n_observed_dofs} observed and '
+                         f'{d.n_controlled_dofs} controlled DOFs need a layout naming them '
+                         f'(train_to_file(..., layout=Layout(observed=..., controlled=...)))')
+    return layout
+
+
+def train_to_file(demos, out_path, layout: Layout = None, observed_frame: str = 'iiwa_link_0',
+                  **kwargs):
+    """:func:`train`, then save the model with the layout's names and units (default: the
+    bag layout, for 3 + 7 DOFs) and the training summary. A wrist in metres (the bag layout's
+    observed agent) gets the wrist's observation noise unless ``observation_noise`` is given."""
+    demos = list(demos)
+    layout = (layout or default_layout(demos)).check(demos)
+    if layout.observed == bag_layout().observed and layout.observed_units == ('m',) * 3:
+        kwargs.setdefault('observation_noise', WRIST_OBSERVATION_NOISE)
     model, info = train(demos, **kwargs)
-    save_model(Path(out_path), model, observed_names=OBSERVED_NAMES,
-               controlled_names=JOINT_NAMES, component_labels=component_labels(model, demos),
-               extra={'training': info})
+    save_model(Path(out_path), model, layout=layout, observed_frame=observed_frame,
+               component_labels=component_labels(model, demos), extra={'training': info})
     return model, info

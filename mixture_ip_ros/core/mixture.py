@@ -15,6 +15,8 @@ from scipy.special import logsumexp
 from .basis import GaussianBasis
 from .demonstration import Demonstration
 from .interaction import condition_on_observed, trajectory_distribution
+from .phase import (alpha_log_density, alpha_m_step, alpha_penalty, alpha_prior_std,
+                    timing_variance)
 from .promp import (LOG_2PI, _regularised_cov, covariance_penalty, expected_sq_residual,
                     observation_stats, weight_posterior)
 
@@ -84,26 +86,38 @@ def gmm_maximization(W, resp, prior_cov, prior_strength, extra_cov=None):
 class MixtureIProMP:
     """Mixture of Interaction ProMPs learned from unlabeled demonstrations.
 
-    Parameters are configuration only; ``fit`` sets the fitted attributes (trailing underscore):
-    ``basis_``, ``n_observed_``, ``n_controlled_``, ``weights_`` (K,), ``means_`` (K, d),
-    ``covariances_`` (K, d, d), ``noise_var_`` (P+Q,), ``alpha_mean_``/``alpha_std_`` (K,) the
+    Any layout: the observed agent has P >= 1 DOFs, the controlled agent Q >= 0 (Q = 0 is a
+    single-agent mixture: it recognises a movement and predicts its rest from a partial
+    observation). Parameters are configuration only; ``fit`` sets the fitted attributes
+    (trailing underscore): ``basis_``, ``n_observed_``, ``n_controlled_``, ``weights_`` (K,),
+    ``means_`` (K, d), ``covariances_`` (K, d, d), ``noise_var_`` the observation noise
+    variance of eq. 15 per DOF in the DOF's own unit squared, (P+Q,) tied across components or
+    (K, P+Q) with ``noise='per_component'``, ``alpha_mean_``/``alpha_std_`` (K,) the
     per-component prior over the phase speed alpha = 1/T, ``log_likelihood_`` per EM iteration
-    (penalised, monotone), ``resp_`` (n, K).
+    (penalised, monotone), ``resp_`` (n, K), ``classes_`` (the labels of a supervised fit, else
+    None).
 
     ``prior_strength`` pseudo-samples of a shared covariance ``prior_cov_`` regularise every
     component covariance (conjugate prior, so EM stays monotone in the penalised likelihood):
-    the within-component covariance pooled over the k-means clusters (``method='regression'``)
-    plus a diagonal floor of ``prior_scale`` times each weight's variance over all
-    demonstrations. This keeps every
+    the within-component covariance pooled over the initial clusters (k-means, or the labels of
+    a supervised fit; ``method='regression'``) plus a diagonal floor of ``prior_scale`` times
+    each weight's variance over all demonstrations. Every component shrinks towards the same
+    target with the same strength, so their likelihoods stay comparable; this keeps every
     component positive definite with fewer members than weights and its posterior calibrated.
-    ``observation_noise`` (metres) is the sensor noise added to the learned residual variance
-    of the observed agent when conditioning on new observations.
+
+    Noise: ``noise='tied'`` (default) learns one variance per DOF shared by all components
+    (pooled residuals), so components are compared on the same noise floor; 'per_component'
+    learns one per component and DOF. ``noise_var`` (per DOF, or a scalar) fixes the noise
+    instead of learning it: separately fitted models (one per class) given the same
+    ``noise_var`` share the noise model. ``observation_noise`` (per observed DOF or a scalar, in
+    the DOF's unit) is extra sensor noise of the online stream, added to the learned variance
+    when conditioning on new observations (none by default).
     """
 
     def __init__(self, n_components: int = 3, n_basis: int = 15, method: str = 'regression',
                  ridge: float = 1e-6, prior_strength: float = 10.0, prior_scale: float = 0.02,
                  max_iter: int = 200, tol: float = 1e-7, n_init: int = 10, random_state=0,
-                 observation_noise: float = 0.01, min_alpha_rel_std: float = 0.05):
+                 observation_noise=0.0, noise: str = 'tied', noise_var=None):
         self.n_components = n_components
         self.n_basis = n_basis
         self.method = method
@@ -115,36 +129,55 @@ class MixtureIProMP:
         self.n_init = n_init
         self.random_state = random_state
         self.observation_noise = observation_noise
-        self.min_alpha_rel_std = min_alpha_rel_std
+        self.noise = noise
+        self.noise_var = noise_var
 
     # ------------------------------------------------------------------ learning
-    def fit(self, demonstrations):
+    def fit(self, demonstrations, labels=None):
+        """Learn the mixture from ``demonstrations`` (unlabeled: k-means then EM, eqs. 7-10).
+
+        ``labels`` (n,), optional: a supervised fit with one component per distinct label
+        (sorted; ``n_components`` must equal their number) and the responsibilities fixed to
+        the labels, i.e. one Interaction ProMP per class sharing the noise model and the
+        covariance prior. ``classes_`` then names the components.
+        """
         demos = _validate_demonstrations(demonstrations, self.n_components)
-        if self.method not in ('regression', 'em'):
-            raise ValueError(f"method must be 'regression' or 'em', got {self.method!r}")
+        self._check_params()
         self.basis_ = GaussianBasis(self.n_basis)
         self.n_observed_ = demos[0].n_observed_dofs
         self.n_controlled_ = demos[0].n_controlled_dofs
-        N = self.n_basis
-        stats, W = [], []
-        for demo in demos:
-            z = demo.t / demo.duration
-            Y = np.hstack([demo.observed, demo.controlled])
-            st = observation_stats(self.basis_, z, Y)
-            if self.method == 'regression' and np.any(st.m < 1):
-                raise ValueError(f'demonstration {demo.name!r} has a DOF never observed; '
-                                 "use method='em' for missing data")
-            stats.append(st)
-            ridge = self.ridge if self.method == 'regression' else max(self.ridge, 1e-2)
-            W.append(np.concatenate([np.linalg.solve(st.G[j] + ridge * np.eye(N), st.b[j])
-                                     for j in range(len(st.m))]))
-        W = np.array(W)
+        D = self.n_observed_ + self.n_controlled_
+        fixed_noise = None
+        if self.noise_var is not None:
+            fixed_noise = np.broadcast_to(np.asarray(self.noise_var, dtype=float), (D,)).copy()
+            if not np.all(np.isfinite(fixed_noise) & (fixed_noise > 0)):
+                raise ValueError(f'noise_var must be positive and finite, got {self.noise_var!r}')
+        stats = [observation_stats(self.basis_, demo.phase,
+                                   np.hstack([demo.observed, demo.controlled])) for demo in demos]
+        if self.method == 'regression':
+            for demo, st in zip(demos, stats):
+                if np.any(st.m < 1):
+                    raise ValueError(f'demonstration {demo.name!r} has a DOF never observed; '
+                                     "use method='em' for missing data")
+        W = np.array([self._ridge_weights(st) for st in stats])
         n, d = W.shape
+        K = self.n_components
+        # A component is a joint p(w, alpha | k) = p(w | k) p(alpha | k) over shape and phase
+        # speed alpha = 1/T (eq. 17's independence of w and alpha within a pattern): patterns
+        # that differ in speed are told apart by it, and p(alpha | k) is the online prior.
+        alphas = np.array([1.0 / demo.duration for demo in demos])
+        timing = timing_variance([demo.duration for demo in demos],
+                                 [float(np.median(np.diff(demo.t))) for demo in demos])
         floor = self.prior_scale * np.maximum(W.var(axis=0), 1e-12)
-        labels = kmeans(W / np.sqrt(floor), self.n_components,
-                        random_state=self.random_state, n_init=self.n_init)
-        resp = np.eye(self.n_components)[labels]
-        # Shrinkage target: the within-component covariance pooled over the k-means clusters
+        if labels is None:
+            self.classes_ = None
+            a_scale = np.sqrt(self.prior_scale * max(alphas.var(), timing.mean(), 1e-24))
+            init = kmeans(np.column_stack([W / np.sqrt(floor), alphas / a_scale]), K,
+                          random_state=self.random_state, n_init=self.n_init)
+        else:
+            self.classes_, init = _label_indices(labels, n, K)
+        resp = np.eye(K)[init]
+        # Shrinkage target: the within-component covariance pooled over the initial clusters
         # (shape variability shared by all patterns) plus a small diagonal floor. A component
         # with a dozen members then borrows the pooled structure instead of trusting spurious
         # correlations of its own sample covariance.
@@ -152,24 +185,41 @@ class MixtureIProMP:
         # has gaps, so the target is the diagonal floor alone.
         self.prior_cov_ = np.diag(floor)
         if self.method == 'regression':
-            E = W - np.array([W[labels == k].mean(axis=0)
-                              for k in range(self.n_components)])[labels]
+            E = W - np.array([W[init == k].mean(axis=0) if np.any(init == k) else W.mean(axis=0)
+                              for k in range(K)])[init]
             self.prior_cov_ += E.T @ E / n
+        # The same for alpha: the within-cluster variance pooled over the initial clusters, at
+        # least what the sampling leaves (timing).
+        a_within = alphas - np.array([alphas[init == k].mean() if np.any(init == k)
+                                      else alphas.mean() for k in range(K)])[init]
+        self.alpha_prior_var_ = float(max(np.mean(a_within ** 2), timing.mean(),
+                                          (1e-6 * alphas.mean()) ** 2))
         weights, means, covs = gmm_maximization(W, resp, self.prior_cov_, self.prior_strength)
-        resid = sum(expected_sq_residual(st, w, np.zeros((d, d))) for st, w in zip(stats, W))
-        noise = np.maximum(resid / np.maximum(sum(st.m for st in stats), 1), 1e-10)
+        a_mean, a_var, nk = alpha_m_step(alphas, resp, self.alpha_prior_var_, self.prior_strength)
+        zero = np.zeros((d, d))
+        sq = np.array([expected_sq_residual(st, w, zero) for st, w in zip(stats, W)])  # (n, D)
+        m = np.array([st.m for st in stats])                                          # (n, D)
+        noise = fixed_noise if fixed_noise is not None else self._noise_m_step(sq, m, resp)
         self.log_likelihood_ = []
         prev = -np.inf
         self.converged_ = False
         for it in range(self.max_iter):
+            lp_alpha = alpha_log_density(alphas, a_mean, a_var)
             if self.method == 'regression':
-                resp, ll = gmm_responsibilities(W, weights, means, covs)
+                lp = gmm_log_prob(W, weights, means, covs) + lp_alpha            # eq. 7
+                if labels is None:
+                    norm = logsumexp(lp, axis=1)
+                    resp, ll = np.exp(lp - norm[:, None]), float(norm.sum())
+                else:
+                    ll = float(np.sum(resp * lp))
                 post_means, post_covs = W, None
             else:
-                resp, ll, post_means, post_covs = self._latent_e_step(stats, weights, means, covs,
-                                                                      noise)
+                resp, ll, post_means, post_covs = self._latent_e_step(
+                    stats, weights, means, covs, noise, lp_alpha,
+                    resp if labels is not None else None)
             ll += sum(covariance_penalty(linalg.cho_factor(c, lower=True), self.prior_cov_,
                                          self.prior_strength) for c in covs)
+            ll += alpha_penalty(a_var, self.alpha_prior_var_, self.prior_strength)
             self.log_likelihood_.append(ll)
             if ll - prev < self.tol * max(1.0, abs(ll)):
                 self.converged_ = True
@@ -177,48 +227,94 @@ class MixtureIProMP:
             prev = ll
             weights, means, covs = gmm_maximization(post_means, resp, self.prior_cov_,
                                                     self.prior_strength, post_covs)
-            if self.method == 'em':
-                num = sum(resp[i, k] * expected_sq_residual(stats[i], post_means[i, k],
-                                                             post_covs[i, k])
-                          for i in range(n) for k in range(self.n_components))
-                noise = np.maximum(num / np.maximum(sum(st.m for st in stats), 1), 1e-10)
+            a_mean, a_var, nk = alpha_m_step(alphas, resp, self.alpha_prior_var_,
+                                             self.prior_strength)
+            if self.method == 'em' and fixed_noise is None:
+                sq = np.einsum('ik,ikj->ij' if self.noise == 'tied' else 'ik,ikj->ikj', resp,
+                               np.array([[expected_sq_residual(stats[i], post_means[i, k],
+                                                               post_covs[i, k])
+                                          for k in range(K)] for i in range(n)]))
+                noise = self._noise_m_step(sq, m, resp)
+        if self.method == 'regression' and fixed_noise is None:
+            noise = self._noise_m_step(sq, m, resp)
         self.n_iter_ = len(self.log_likelihood_)
         self.weights_, self.means_, self.covariances_ = weights, means, covs
         self.resp_ = resp
         self.noise_var_ = noise
-        alphas = np.array([1.0 / demo.duration for demo in demos])
-        nk = resp.sum(axis=0)
-        # A component EM left without members keeps the pooled phase prior (not 0 / 0).
-        empty = nk < 1e-12
-        nk = np.where(empty, 1.0, nk)
-        mean = np.where(empty, alphas.mean(), resp.T @ alphas / nk)
-        var = np.where(empty, alphas.var(),
-                       np.einsum('ik,ik->k', resp, (alphas[:, None] - mean) ** 2) / nk)
-        self.alpha_mean_ = mean
-        self.alpha_std_ = np.maximum(np.sqrt(var), self.min_alpha_rel_std * mean)
+        self.alpha_mean_ = a_mean
+        self.alpha_var_ = a_var
+        timing_k = np.where(nk > 1e-12, resp.T @ timing / np.maximum(nk, 1e-12), timing.mean())
+        self.alpha_std_ = alpha_prior_std(a_var, nk, timing_k)
         return self
 
-    def _latent_e_step(self, stats, weights, means, covs, noise):
+    def _check_params(self):
+        if self.method not in ('regression', 'em'):
+            raise ValueError(f"method must be 'regression' or 'em', got {self.method!r}")
+        if self.noise not in ('tied', 'per_component'):
+            raise ValueError(f"noise must be 'tied' or 'per_component', got {self.noise!r}")
+        on = np.asarray(self.observation_noise, dtype=float)
+        if on.ndim > 1 or not np.all(np.isfinite(on) & (on >= 0)):
+            raise ValueError('observation_noise must be a number or one number per observed DOF, '
+                             f'each >= 0 (in the DOF\'s unit), got {self.observation_noise!r}')
+
+    def _ridge_weights(self, st):
+        """Eq. 14 per DOF (ridge); for EM only a starting point (more ridge where data is thin)."""
+        N = self.n_basis
+        ridge = self.ridge if self.method == 'regression' else max(self.ridge, 1e-2)
+        return np.concatenate([np.linalg.solve(st.G[j] + ridge * np.eye(N), st.b[j])
+                               for j in range(len(st.m))])
+
+    def _noise_m_step(self, sq, m, resp):
+        """sigma^2 of eq. 15 per DOF: expected squared residuals over observed samples.
+
+        Tied: sum_i E||y_ij - A w_i||^2 / sum_i m_ij (``sq`` (n, D)). Per component: each
+        demonstration's residual weighted by its responsibility r_ik (``sq`` (n, D) for
+        regression fits, (n, K, D) for EM)."""
+        if self.noise == 'tied':
+            if sq.ndim == 3:
+                sq = sq.sum(axis=1)
+            return np.maximum(sq.sum(axis=0) / np.maximum(m.sum(axis=0), 1), 1e-10)
+        num = (np.einsum('ik,ij->kj', resp, sq) if sq.ndim == 2 else sq.sum(axis=0))
+        den = np.einsum('ik,ij->kj', resp, m)
+        # A component without members takes the tied estimate.
+        tied = (sq if sq.ndim == 2 else sq.sum(axis=1)).sum(axis=0) / np.maximum(m.sum(axis=0), 1)
+        out = np.where(den > 1e-9, num / np.maximum(den, 1e-9), tied)
+        return np.maximum(out, 1e-10)
+
+    def _latent_e_step(self, stats, weights, means, covs, noise, lp_alpha, fixed_resp=None):
+        """E step with latent weights: eqs. 27-28 per (demonstration, component) and eq. 7 with
+        each demonstration's marginal likelihood (eq. 21); ``fixed_resp`` keeps the
+        responsibilities of a supervised fit (the returned log-likelihood is then the
+        complete-data one given the labels)."""
         n, K, d = len(stats), len(weights), means.shape[1]
         post_means = np.empty((n, K, d))
         post_covs = np.empty((n, K, d, d))
         lp = np.empty((n, K))
         for k in range(K):
             chol = linalg.cho_factor(covs[k], lower=True)
+            nk = noise if noise.ndim == 1 else noise[k]
             for i, st in enumerate(stats):
-                post_means[i, k], post_covs[i, k], ll = weight_posterior(st, means[k], chol, noise)
-                lp[i, k] = np.log(weights[k]) + ll
+                post_means[i, k], post_covs[i, k], ll = weight_posterior(st, means[k], chol, nk)
+                lp[i, k] = np.log(weights[k]) + ll + lp_alpha[i, k]
+        if fixed_resp is not None:
+            return fixed_resp, float(np.sum(fixed_resp * lp)), post_means, post_covs
         norm = logsumexp(lp, axis=1)
         return np.exp(lp - norm[:, None]), float(norm.sum()), post_means, post_covs
 
     # ------------------------------------------------------------------ inference
     @property
     def observed_noise_var_(self):
-        """Sigma_D of eq. 4: learned residual variance of the observed agent + sensor noise."""
-        return self.noise_var_[:self.n_observed_] + self.observation_noise ** 2
+        """Sigma_D of eq. 4 per observed DOF: the learned noise variance of eq. 15 plus the
+        online sensor noise; (P,) when tied, (K, P) per component."""
+        return self.noise_var_[..., :self.n_observed_] + np.square(self.observation_noise)
+
+    def _observed_noise(self, k):
+        nv = self.observed_noise_var_
+        return nv if nv.ndim == 1 else nv[k]
 
     def component_log_evidence(self, z, Y_obs):
-        """log p(D | k) for every component (the integral under eq. 11), observed agent only."""
+        """log p(D | k) for every component (the integral under eq. 11, eq. 21 with the observed
+        agent's block), observed agent only."""
         self._check_fitted()
         z, Y_obs = _validate_observation(z, Y_obs, self.n_observed_)
         do = self.n_observed_ * self.n_basis
@@ -226,14 +322,76 @@ class MixtureIProMP:
         out = np.empty(self.n_components)
         for k in range(self.n_components):
             chol = linalg.cho_factor(self.covariances_[k][:do, :do], lower=True)
-            out[k] = weight_posterior(st, self.means_[k][:do], chol, self.observed_noise_var_)[2]
+            out[k] = weight_posterior(st, self.means_[k][:do], chol, self._observed_noise(k))[2]
         return out
 
-    def component_posterior(self, z, Y_obs):
-        """Eq. 11: p(k | D) for observations Y_obs (m, P) of the observed agent at phases z."""
+    def component_posterior(self, z, Y_obs, alpha=None):
+        """Eq. 11: p(k | D) for observations Y_obs (m, P) of the observed agent at phases z.
+        With ``alpha`` (1/T, known with the phase) also its evidence p(alpha | k)."""
         self._check_fitted()
         lp = np.log(self.weights_) + self.component_log_evidence(z, Y_obs)
+        if alpha is not None:
+            lp += alpha_log_density([alpha], self.alpha_mean_, self.alpha_std_ ** 2)[0]
         return np.exp(lp - logsumexp(lp))
+
+    def score_demonstrations(self, demonstrations):
+        """log p(D_i, alpha_i) of each demonstration's observed agent and phase speed, phase known
+        (z = t / T): eq. 6 over components with the marginal likelihood of eq. 21 and the
+        component's p(alpha | k). The held-out criterion for K."""
+        self._check_fitted()
+        out = []
+        for demo in demonstrations:
+            ok = ~np.isnan(demo.observed).any(axis=1)
+            lp = (np.log(self.weights_)
+                  + self.component_log_evidence(demo.phase[ok], demo.observed[ok])
+                  + alpha_log_density([1.0 / demo.duration], self.alpha_mean_,
+                                      self.alpha_std_ ** 2)[0])
+            out.append(float(logsumexp(lp)))
+        return np.array(out)
+
+    # --------------------------------------------------------- weight vectors (eqs. 6-7)
+    def demonstration_weights(self, demonstrations):
+        """The weight vectors that ``fit`` clusters: eq. 14 per demonstration and DOF (ridge),
+        stacked [observed, controlled]; shape (n, (P+Q) N). Needs every DOF observed."""
+        self._check_fitted()
+        W = []
+        for demo in demonstrations:
+            st = observation_stats(self.basis_, demo.phase,
+                                   np.hstack([demo.observed, demo.controlled]))
+            if np.any(st.m < 1):
+                raise ValueError(f'demonstration {demo.name!r} has a DOF never observed')
+            W.append(self._ridge_weights(st))
+        return np.array(W)
+
+    def score_samples(self, W):
+        """log p(w_i) = log sum_k alpha_k N(w_i; mu_k, Sigma_k) (eq. 6) for weight vectors W (n, d)."""
+        return logsumexp(gmm_log_prob(self._checked_weights(W), self.weights_, self.means_,
+                                      self.covariances_), axis=1)
+
+    def score(self, W):
+        """Mean log-likelihood per weight vector (scikit-learn's ``score``)."""
+        return float(np.mean(self.score_samples(W)))
+
+    def predict_proba(self, W):
+        """Eq. 7: p(k | w_i) for weight vectors W (n, d); shape (n, K)."""
+        return gmm_responsibilities(self._checked_weights(W), self.weights_, self.means_,
+                                    self.covariances_)[0]
+
+    def predict(self, W):
+        """The most probable component of each weight vector (eq. 12 on weights)."""
+        return np.argmax(self.predict_proba(W), axis=1)
+
+    def _checked_weights(self, W):
+        self._check_fitted()
+        W = np.asarray(W, dtype=float)
+        d = self.means_.shape[1]
+        if W.ndim == 1:
+            W = W[None]
+        if W.ndim != 2 or W.shape[1] != d:
+            raise ValueError(f'weight vectors must have shape (n, {d}), got {W.shape}')
+        if not np.all(np.isfinite(W)):
+            raise ValueError('weight vectors contain NaN or Inf')
+        return W
 
     def condition(self, z, Y_obs, component=None):
         """Eqs. 12-13: the most probable component (or ``component``) conditioned on D.
@@ -244,7 +402,7 @@ class MixtureIProMP:
         z, Y_obs = _validate_observation(z, Y_obs, self.n_observed_)
         mean, cov = condition_on_observed(self.means_[component], self.covariances_[component],
                                           self.basis_, self.n_observed_, z, Y_obs,
-                                          self.observed_noise_var_)
+                                          self._observed_noise(component))
         return component, mean, cov
 
     def predict_controlled(self, z, Y_obs, z_grid, alpha=1.0, component=None):
@@ -264,12 +422,16 @@ def loo_rms_by_components(demonstrations, candidates, observe: str = 'final', pr
                           **params):
     """Leave-one-out RMS error of the controlled agent's predicted mean trajectory (thesis Figs.
     8 and 10) for every K in ``candidates``. The held-out demonstration is observed at its final
-    wrist position (``observe='final'``, as in the thesis) or along its whole path ('full').
-    ``progress(done, total, K)`` is called after each fit.
+    observed position (``observe='final'``, as in the thesis) or along its whole path ('full').
+    ``progress(done, total, K)`` is called after each fit. Needs a controlled agent (for a
+    single-agent set use :func:`heldout_loglik_by_components`).
 
     Returns an array (len(candidates), n) of per-demonstration RMS errors.
     """
     demos = list(demonstrations)
+    if demos and demos[0].n_controlled_dofs == 0:
+        raise ValueError('leave-one-out RMS of the controlled agent needs a controlled agent; '
+                         'these demonstrations have none (use the held-out log-likelihood)')
     out = np.empty((len(candidates), len(demos)))
     for a, K in enumerate(candidates):
         for i, test in enumerate(demos):
@@ -282,7 +444,7 @@ def loo_rms_by_components(demonstrations, candidates, observe: str = 'final', pr
 
 def controlled_rms(model, demo: Demonstration, observe: str = 'final'):
     """RMS error of the predicted controlled trajectory of ``demo`` over its own samples."""
-    z = demo.t / demo.duration
+    z = demo.phase
     rows = np.flatnonzero(~np.isnan(demo.observed).any(axis=1))
     if observe == 'final':
         rows = rows[-1:]
@@ -293,13 +455,109 @@ def controlled_rms(model, demo: Demonstration, observe: str = 'final'):
     return float(np.sqrt(np.mean((pred[ok] - demo.controlled[ok]) ** 2)))
 
 
-def select_n_components(rms):
-    """Smallest K (index into the candidates) whose mean LOO RMS is within one standard error
-    of the best: where the RMS-vs-K curve reaches its plateau."""
-    mean = rms.mean(axis=1)
-    se = rms.std(axis=1, ddof=1) / np.sqrt(rms.shape[1])
-    best = int(np.argmin(mean))
-    return int(np.flatnonzero(mean <= mean[best] + se[best])[0])
+def cv_folds(n: int, n_folds: int, random_state=0):
+    """Fold index (n,) of each demonstration: a seeded permutation cut into ``n_folds`` parts."""
+    n_folds = int(min(n_folds, n))
+    if n_folds < 2:
+        raise ValueError(f'cross-validation needs at least 2 demonstrations, got {n}')
+    order = np.random.default_rng(random_state).permutation(n)
+    fold = np.empty(n, dtype=int)
+    fold[order] = np.arange(n) % n_folds
+    return fold
+
+
+def heldout_loglik_by_components(demonstrations, candidates, n_folds: int = 5, progress=None,
+                                 fold_seed=0, **params):
+    """Cross-validated log-likelihood of the observed agent of held-out demonstrations,
+    log p(D_i) with the phase known (:meth:`MixtureIProMP.score_demonstrations`), for every K in
+    ``candidates``: works with or without a controlled agent. The same folds for every K, so
+    the curves are paired. Returns (len(candidates), n); higher is better.
+    """
+    demos = list(demonstrations)
+    fold = cv_folds(len(demos), n_folds, fold_seed)
+    out = np.empty((len(candidates), len(demos)))
+    done, total = 0, len(candidates) * (fold.max() + 1)
+    for a, K in enumerate(candidates):
+        for f in range(fold.max() + 1):
+            train = [d for d, g in zip(demos, fold) if g != f]
+            test = np.flatnonzero(fold == f)
+            model = MixtureIProMP(n_components=K, **params).fit(train)
+            out[a, test] = model.score_demonstrations([demos[i] for i in test])
+            done += 1
+            if progress:
+                progress(done, total, K)
+    return out
+
+
+def select_n_components(scores, higher_is_better: bool = False, paired: bool = False):
+    """Smallest K (index into the candidates) whose mean score is within one standard error of
+    the best: where the curve reaches its plateau (LOO RMS, lower is better; or held-out
+    log-likelihood, ``higher_is_better``). See :func:`selection_curve` for ``paired``."""
+    return selection_curve(scores, higher_is_better, paired)['index']
+
+
+def selection_curve(scores, higher_is_better: bool = False, paired: bool = False):
+    """The K choice and its evidence from per-demonstration scores (candidates, n).
+
+    Plateau rule: the smallest K within one standard error of the best K's scores (the
+    thesis's RMS curves) or, ``paired``, the smallest K not significantly worse than the best:
+    its per-demonstration difference to the best K within two standard errors. Held-out
+    log-likelihoods need the paired form: each demonstration's own level (its number of
+    samples, its noise) varies far more between demonstrations than between K, while the
+    paired differences are so consistent that one standard error would call a negligible
+    gain of a superfluous component significant.
+
+    Whether the curve has a clear optimum (paired differences, two standard errors): the chosen
+    K beats the first candidate, or the first candidate is chosen and beats every other.
+    Otherwise the curve is flat within its noise and the note says so.
+    Returns a dict: index, mean, se (per candidate), clear (bool), note (str).
+    """
+    s = np.asarray(scores, dtype=float)
+    g = s if higher_is_better else -s               # higher is better from here on
+    n = s.shape[1]
+
+    def se_of(x):
+        return float(x.std(ddof=1) / np.sqrt(n)) if n > 1 else 0.0
+    mean = s.mean(axis=1)
+    se = np.array([se_of(r) for r in s])
+    best = int(np.argmax(g.mean(axis=1)))
+    if paired:
+        within = [(g[best] - g[a]).mean() <= 2 * se_of(g[best] - g[a]) for a in range(len(s))]
+    else:
+        within = g.mean(axis=1) >= g[best].mean() - se[best]
+    index = int(np.flatnonzero(within)[0])
+
+    def beats(a, b):
+        d = g[a] - g[b]
+        return d.mean() > 2 * se_of(d)
+    if len(s) == 1:
+        clear, note = False, 'a single candidate: nothing was compared'
+    elif index > 0:
+        clear = beats(index, 0)
+        note = ('clear: better than the first candidate by more than two paired standard errors'
+                if clear else 'no clear optimum: the curve is flat within two paired standard '
+                              'errors of the first candidate')
+    else:
+        clear = all(beats(0, b) for b in range(1, len(s)))
+        note = ('clear: the first candidate beats every other by more than two paired standard '
+                'errors' if clear else 'no clear optimum: the curve is flat (no candidate is '
+                'better than the first by two paired standard errors); the first is kept by '
+                'parsimony')
+    return {'index': index, 'mean': mean.tolist(), 'se': se.tolist(), 'clear': bool(clear),
+            'note': note}
+
+
+def _label_indices(labels, n, n_components):
+    """(sorted distinct labels, index of each demonstration's label) for a supervised fit."""
+    labels = np.asarray(labels)
+    if labels.shape != (n,):
+        raise ValueError(f'labels must have one entry per demonstration ({n}), got shape '
+                         f'{labels.shape}')
+    classes, index = np.unique(labels, return_inverse=True)
+    if len(classes) != n_components:
+        raise ValueError(f'a supervised fit has one component per class: n_components='
+                         f'{n_components} but the labels name {len(classes)} classes')
+    return [c.item() if hasattr(c, 'item') else c for c in classes], index
 
 
 def _validate_demonstrations(demonstrations, n_components):

@@ -18,12 +18,16 @@ from .phase import alpha_grid, alpha_log_prior
 
 
 class OnlineEstimator:
-    """Recursive p(k, alpha | D) for a fitted :class:`MixtureIProMP`.
+    """Recursive p(k, alpha | D) for a fitted :class:`MixtureIProMP` (any layout: P >= 1
+    observed DOFs, Q >= 0 controlled).
 
-    ``min_interval`` (s): observations closer in time than this to the last one used are
-    skipped. Consecutive motion-capture samples are strongly correlated (the residual between
-    a person's path and the model is smooth), so feeding 100+ Hz as independent evidence
-    makes the posterior overconfident; 20 Hz is about the bandwidth of the residual.
+    Decimation: ``min_interval`` (s). An observation closer in time than this to the last one
+    used is not absorbed: :meth:`update` returns False for it and counts it in ``n_skipped``;
+    it still advances the time the phase refers to (:meth:`phase` without an argument is the
+    phase at the latest time offered, used or not). Consecutive motion-capture samples are
+    strongly correlated (the residual between a person's path and the model is smooth), so
+    feeding 100+ Hz as independent evidence makes the posterior overconfident; 20 Hz is about
+    the bandwidth of the residual. ``min_interval=0`` uses every sample.
     """
 
     def __init__(self, model, n_alpha: int = 50, min_interval: float = 0.05,
@@ -42,12 +46,16 @@ class OnlineEstimator:
         self._mu0 = np.repeat(model.means_[:, :do], M, axis=0)
         self._sigma0 = np.repeat(model.covariances_[:, :do, :do], M, axis=0)
         self._psi_index = np.tile(np.arange(M), K)
+        # Tied noise (P,) is one vector for every hypothesis; per-component noise is (K, P).
         self._noise = np.ascontiguousarray(model.observed_noise_var_, dtype=float)
         # Regression of controlled on observed weights per component (exact conditioning).
         self._gain, self._cond_cov = [], []
         for k in range(K):
             C = model.covariances_[k]
-            B = linalg.cho_solve(linalg.cho_factor(C[:do, :do], lower=True), C[:do, do:]).T
+            if C.shape[0] == do:            # no controlled agent: nothing to regress
+                B = np.zeros((0, do))
+            else:
+                B = linalg.cho_solve(linalg.cho_factor(C[:do, :do], lower=True), C[:do, do:]).T
             self._gain.append(B)
             self._cond_cov.append(C[do:, do:] - B @ C[:do, do:])
         self.reset()
@@ -58,14 +66,17 @@ class OnlineEstimator:
         self.sigma = self._sigma0.copy()
         self.log_evidence_flat = np.zeros(len(self._mu0))
         self.n_observations = 0
-        self.t_last = None
+        self.n_skipped = 0
+        self.t_last = None      # time of the last observation used
+        self.t_seen = None      # time of the last observation offered (used or skipped)
         self._joint = None      # p(k, alpha_m | D), computed once per update
 
     def update(self, t: float, y) -> bool:
         """Add the observed agent's position ``y`` (P,) at ``t`` seconds after onset.
 
-        Returns False (and changes nothing) when the sample is within ``min_interval`` of the
-        last one used. Raises ValueError for non-finite or misshaped input or time going back.
+        Returns False when the sample is within ``min_interval`` of the last one used (then
+        only ``n_skipped`` and the phase's time advance). Raises ValueError for non-finite or
+        misshaped input or time going back.
         """
         y = self._checked(y)
         if not self.admit(t):
@@ -86,8 +97,11 @@ class OnlineEstimator:
             if t <= self.t_last:
                 raise ValueError(f'time must increase: {t} after {self.t_last}')
             if t - self.t_last < self.min_interval - 1e-9:   # stamps are ns: no float slack
+                self.n_skipped += 1
+                self.t_seen = max(float(t), self.t_seen)
                 return False
         self.t_last = float(t)
+        self.t_seen = float(t) if self.t_seen is None else max(float(t), self.t_seen)
         return True
 
     def absorb(self, t: float, y) -> None:
@@ -105,8 +119,15 @@ class OnlineEstimator:
     def _absorb(self, t, y):
         self._joint = None
         psi = basis_rows(self.alphas * t, self.model.basis_.centers, self.model.basis_.width)
-        kalman_update(self.sigma, self.mu, self.log_evidence_flat, psi, self._psi_index, y,
-                      self._noise)
+        if self._noise.ndim == 1:
+            kalman_update(self.sigma, self.mu, self.log_evidence_flat, psi, self._psi_index, y,
+                          self._noise)
+        else:                           # per-component noise: one call per component's block
+            M = len(self.alphas)
+            for k in range(self.n_components):
+                h = slice(k * M, (k + 1) * M)
+                kalman_update(self.sigma[h], self.mu[h], self.log_evidence_flat[h], psi,
+                              self._psi_index[h], y, self._noise[k])
         self.n_observations += 1
 
     def _checked(self, y) -> np.ndarray:
@@ -167,8 +188,9 @@ class OnlineEstimator:
         return prior_mean[do:] + self._gain[k] @ (mu_o - prior_mean[:do])
 
     def phase(self, t=None):
-        """Current phase z = alpha* t under the MAP hypothesis, clamped to [0, 1]."""
-        t = self.t_last if t is None else t
+        """Phase z = alpha* t under the MAP hypothesis, clamped to [0, 1], at ``t`` (s since
+        onset; default: the latest observation offered, also when decimation skipped it)."""
+        t = self.t_seen if t is None else t
         if t is None:
             return 0.0
         return float(np.clip(self.map_hypothesis()[1] * t, 0.0, 1.0))

@@ -12,13 +12,48 @@ from scipy.special import logsumexp
 from .basis import GaussianBasis
 
 
-def alpha_prior_from_durations(durations, weights=None, min_rel_std: float = 0.05):
-    """Gaussian prior over alpha = 1/T from training durations (thesis 4.1, below eq. 16)."""
+def timing_variance(durations, periods):
+    """Variance of alpha = 1/T that the sampling alone leaves: onset and end are each known to
+    one sample period dt, so T has variance 2 dt^2 / 12 and alpha, to first order,
+    alpha^4 dt^2 / 6. (n,)"""
     alphas = 1.0 / np.asarray(durations, dtype=float)
-    w = np.ones_like(alphas) if weights is None else np.asarray(weights, dtype=float)
-    mean = w @ alphas / w.sum()
-    std = np.sqrt(w @ (alphas - mean) ** 2 / w.sum())
-    return float(mean), float(max(std, min_rel_std * mean))
+    return alphas ** 4 * np.asarray(periods, dtype=float) ** 2 / 6.0
+
+
+def alpha_log_density(alphas, mean, var):
+    """log N(alpha_i; m_k, v_k) for every demonstration and component: (n, K)."""
+    a = np.asarray(alphas, dtype=float)[:, None]
+    return -0.5 * (np.log(2 * np.pi * var)[None, :] + (a - mean[None, :]) ** 2 / var[None, :])
+
+
+def alpha_m_step(alphas, resp, prior_var: float, strength: float):
+    """M step of p(alpha | k) = N(m_k, v_k), the phase-speed factor of a component's joint
+    p(w, alpha | k) = p(w | k) p(alpha | k) (thesis 4.1: weights and alpha independent, eq. 17).
+
+    m_k = sum_i r_ik alpha_i / n_k; v_k = (sum_i r_ik (alpha_i - m_k)^2 + s v0) / (n_k + s),
+    the MAP variance under a conjugate prior of ``strength`` s pseudo-demonstrations of variance
+    ``prior_var`` v0 (as the weight covariances are regularised). A component without members
+    gets the mean of all and v0. Returns (m (K,), v (K,), n_k (K,)).
+    """
+    a = np.asarray(alphas, dtype=float)
+    nk = resp.sum(axis=0)
+    empty = nk < 1e-12
+    mean = np.where(empty, a.mean(), resp.T @ a / np.where(empty, 1.0, nk))
+    S = np.einsum('ik,ik->k', resp, (a[:, None] - mean[None, :]) ** 2)
+    return mean, (S + strength * prior_var) / (nk + strength), nk
+
+
+def alpha_penalty(var, prior_var: float, strength: float) -> float:
+    """log of the conjugate prior of :func:`alpha_m_step` (up to a constant), summed over k."""
+    return float(-0.5 * strength * np.sum(prior_var / var + np.log(var)))
+
+
+def alpha_prior_std(var, nk, timing_var):
+    """Spread of the online prior p(alpha | k): the component's variance times (1 + 1/n_k), the
+    predictive spread of a new demonstration's alpha when the mean itself is estimated from n_k
+    demonstrations, plus the sampling's timing variance; from the data and the sensor, never a
+    fixed floor."""
+    return np.sqrt(var * (1.0 + 1.0 / np.maximum(nk, 1.0)) + timing_var)
 
 
 def alpha_grid(alpha_mean, alpha_std, n_alpha: int = 50, n_std: float = 3.0):
@@ -71,5 +106,5 @@ def phase_posterior_batch(model, t, Y, grid, observed_only: bool = True):
     for k in range(model.n_components):
         for m, a in enumerate(grid):
             lp[k, m] += log_evidence_batch(model.means_[k][:do], model.covariances_[k][:do, :do],
-                                           model.basis_, t, Y, a, model.observed_noise_var_)
+                                           model.basis_, t, Y, a, model._observed_noise(k))
     return lp - logsumexp(lp)

@@ -11,6 +11,18 @@ noise of about sigma_p * sqrt(12 / (n w^2)) for n samples in a window of w secon
 500 Hz over 0.15 s is 3 mm/s, at 100 Hz 6 mm/s, under the default rest threshold of 3 cm/s
 (with more noise, raise ``speed_window`` or the thresholds).
 
+Thresholds relative to the recording's own rest: a real hand never holds perfectly still (a
+person's wrist drifts at 4-7 cm/s before a reach and hovers at 4-8 cm/s after a handover, with
+motion-capture jitter of 0.1-0.2 mm per sample), so fixed speeds fire the onset at once and
+never see the end. The speed while at rest is tracked (its median and scaled median absolute
+deviation over the last ``rest_window`` seconds of rest, lagging ``speed_window`` behind so that
+a starting movement does not count as rest), and the thresholds are the fixed floors ``onset_speed`` /
+``end_speed`` or that rest level plus ``onset_noise_factor`` / ``end_noise_factor`` spreads,
+whichever is higher. No onset is confirmed before ``rest_min`` seconds of rest have been
+measured (0: the fixed floors alone until then, so a recording that starts mid-movement has its
+onset at the first sample). On generated motion with millimetre noise the floors decide, as
+before.
+
 Dating: by the time speed has stayed above threshold the hand has moved for 0.1-1 s (slow
 reaches take longest). A smooth movement leaves rest with zero velocity and acceleration,
 so its displacement grows as (t - t_onset)^3. Once an onset is confirmed, the positions of
@@ -42,10 +54,13 @@ class Event(NamedTuple):
     time: float
 
 
-def fit_cubic_onset(t, positions, lo: float, hi: float, step: float = 0.01) -> float:
-    """Least-squares onset time of p(t) = b + a (t - t_onset)^3_+ with t_onset in [lo, hi].
+def fit_cubic_onset(t, positions, lo: float, hi: float, step: float = 0.01,
+                    drift: bool = False) -> float:
+    """Least-squares onset time of p(t) = b + a (t - t_onset)^3_+ with t_onset in [lo, hi]
+    (``drift``: p(t) = b + c t + a (t - t_onset)^3_+, a hand drifting at a constant velocity c
+    before it leaves rest).
 
-    ``t``: (N,) times, ``positions``: (N, D); b and a are fitted per column for each
+    ``t``: (N,) times, ``positions``: (N, D); b (c) and a are fitted per column for each
     candidate t_onset (closed form). The grid of ``step`` seconds is searched on at most
     ~250 of the samples, then refined to step / 10 on all of them (a few ms in all).
     """
@@ -64,7 +79,23 @@ def fit_cubic_onset(t, positions, lo: float, hi: float, step: float = 0.01) -> f
     tr = t - lo
     xc = x - x.mean(axis=0)
 
+    def best_with_drift(taus, stride):
+        ts, xs = tr[::stride], xc[::stride]
+        tc = ts - ts.mean()
+        tt = max(float(tc @ tc), 1e-300)
+        xs = xs - np.outer(tc, tc @ xs / tt)                # project out [1, t] (x is centred)
+        f = np.clip(ts[None, :] - taus[:, None], 0.0, None) ** 3
+        f = f - f.mean(axis=1, keepdims=True)
+        f = f - np.outer(f @ tc / tt, tc)
+        sff = np.einsum('gn,gn->g', f, f)
+        sfx = f @ xs
+        ok = sff > 1e-30 * max(1.0, float(sff.max()))
+        gain = np.where(ok, np.einsum('gd,gd->g', sfx, sfx) / np.where(ok, sff, 1.0), 0.0)
+        return float(taus[int(np.argmax(gain))])
+
     def best(taus, stride):
+        if drift:
+            return best_with_drift(taus, stride)
         ts, xs = tr[::stride], xc[::stride]
         after = ts > taus[0]  # earlier samples have f = 0 for every candidate
         f = np.clip(ts[after][None, :] - taus[:, None], 0.0, None) ** 3
@@ -99,6 +130,10 @@ class MotionSegmenter:
       stream's first sample or the previous end.
     - 'end' once speed has stayed < ``end_speed`` for ``end_hold`` seconds; its time is
       when the hand came to rest, not when the detector was sure.
+    ``onset_speed`` and ``end_speed`` are floors: the thresholds rise with the measured rest
+    level and spread (``rest_window``, ``onset_noise_factor``, ``end_noise_factor``,
+    ``rest_min``; see the module notes). ``onset_threshold`` / ``end_threshold`` are the
+    ones in force.
 
     Speeds are in m/s and times in seconds; times must strictly increase. Per sample the
     work is O(1) (amortised); the dating fit runs once per onset and once per end.
@@ -107,16 +142,26 @@ class MotionSegmenter:
     def __init__(self, onset_speed: float = 0.06, onset_hold: float = 0.06,
                  end_speed: float = 0.03, end_hold: float = 0.3, speed_window: float = 0.15,
                  gap_timeout: float = 0.1, max_gap: float = 2.0, max_backdate: float = 2.0,
-                 min_window_samples: int = 4):
+                 min_window_samples: int = 4, rest_window: float = 1.0,
+                 onset_noise_factor: float = 5.0, end_noise_factor: float = 3.0,
+                 rest_min: float = 0.1):
         checks = {'onset_speed': onset_speed, 'end_speed': end_speed, 'end_hold': end_hold,
                   'speed_window': speed_window, 'gap_timeout': gap_timeout, 'max_gap': max_gap,
-                  'max_backdate': max_backdate}
+                  'max_backdate': max_backdate, 'rest_window': rest_window,
+                  'onset_noise_factor': onset_noise_factor, 'end_noise_factor': end_noise_factor}
         for name, value in checks.items():
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ValueError(f'MotionSegmenter: {name} must be a positive finite number, '
                                  f'got {value!r}')
         if not (math.isfinite(onset_hold) and onset_hold >= 0):
             raise ValueError(f'MotionSegmenter: onset_hold must be >= 0, got {onset_hold!r}')
+        if not (isinstance(rest_min, (int, float)) and math.isfinite(rest_min)
+                and 0 <= rest_min <= rest_window):
+            raise ValueError(f'MotionSegmenter: rest_min must be in [0, rest_window], got '
+                             f'{rest_min!r}')
+        if end_noise_factor >= onset_noise_factor:
+            raise ValueError(f'MotionSegmenter: end_noise_factor ({end_noise_factor}) must be '
+                             f'below onset_noise_factor ({onset_noise_factor}) to give hysteresis')
         if end_speed >= onset_speed:
             raise ValueError(f'MotionSegmenter: end_speed ({end_speed}) must be below '
                              f'onset_speed ({onset_speed}) to give hysteresis')
@@ -135,8 +180,14 @@ class MotionSegmenter:
         self.max_gap = float(max_gap)
         self.max_backdate = float(max_backdate)
         self.min_window_samples = int(min_window_samples)
+        self.rest_window = float(rest_window)
+        self.onset_noise_factor = float(onset_noise_factor)
+        self.end_noise_factor = float(end_noise_factor)
+        self.rest_min = float(rest_min)
         self._win = deque()    # velocity window (t, x, y, z)
         self._hist = deque()   # last max_backdate seconds of samples, for dating
+        self._pending = deque()  # (t, speed) at rest, not yet speed_window old
+        self._rest = deque()     # (t, speed) of the rest statistics
         self.reset()
 
     # -- public state -------------------------------------------------------------------
@@ -155,6 +206,16 @@ class MotionSegmenter:
         """Latest windowed speed estimate (NaN while the window is too short)."""
         return self._speed
 
+    @property
+    def onset_threshold(self) -> float:
+        """The onset speed in force: onset_speed or the rest level + onset_noise_factor spreads."""
+        return self._on_thr
+
+    @property
+    def end_threshold(self) -> float:
+        """The end speed in force: end_speed or the rest level + end_noise_factor spreads."""
+        return self._end_thr
+
     def reset(self):
         """Forget everything: as if no sample had been seen."""
         self._last_t = None
@@ -165,6 +226,10 @@ class MotionSegmenter:
         self._onset_time = -math.inf
         self._speed = math.nan
         self._hist.clear()
+        self._pending.clear()
+        self._rest.clear()
+        self._on_thr, self._end_thr = self.onset_speed, self.end_speed
+        self._calm_c = None      # centre time of the last speed under the end threshold
         self._restart_window()
         self._reset_onset_search()
         self._reset_end_search()
@@ -204,6 +269,8 @@ class MotionSegmenter:
             hist.popleft()
         speed, center = self._push(t, x, y, z)
         self._speed = speed
+        if not self._moving:
+            self._track_rest(t, speed)
         if speed == speed:  # not NaN: the window is long enough
             if self._moving:
                 events.extend(self._search_end(t, speed, center))
@@ -234,6 +301,35 @@ class MotionSegmenter:
         return [self._close(self._date_end(self._last_t))]
 
     # -- internals ----------------------------------------------------------------------
+    def _track_rest(self, t, speed):
+        """Rest statistics of the speed (see the module notes) and the thresholds from them.
+
+        A speed counts as rest if it was under the end threshold when measured (a rise never
+        does; until five rest speeds are known every speed counts, since a drifting rest can be
+        above the floors) and once it is ``speed_window`` old; level and spread are the median
+        and the scaled median absolute deviation, so the slow start of a movement that slips in
+        before the onset is confirmed hardly moves them."""
+        if speed == speed and (speed < self._end_thr or len(self._rest) < 5):
+            self._pending.append((t, speed))
+        mature = t - self.speed_window + _SLACK
+        while self._pending and self._pending[0][0] <= mature:
+            self._rest.append(self._pending.popleft())
+        horizon = mature - self.rest_window
+        while self._rest and self._rest[0][0] < horizon:
+            self._rest.popleft()
+        if len(self._rest) >= 5:
+            v = np.fromiter((r[1] for r in self._rest), float, len(self._rest))
+            level = float(np.median(v))
+            spread = 1.4826 * float(np.median(np.abs(v - level)))
+            self._on_thr = max(self.onset_speed, level + self.onset_noise_factor * spread)
+            self._end_thr = max(self.end_speed, level + self.end_noise_factor * spread)
+
+    def _rest_known(self) -> bool:
+        if self.rest_min == 0:
+            return True
+        return (len(self._rest) >= 5
+                and self._rest[-1][0] - self._rest[0][0] >= self.rest_min - _SLACK)
+
     def _silence(self, duration):
         events = []
         if not self._gap_reported:
@@ -319,23 +415,28 @@ class MotionSegmenter:
         self._rest_start_t = None
 
     def _search_onset(self, t, speed, center):
-        if speed < self.end_speed:  # at rest: no rise in progress
+        if speed < self._end_thr:  # at rest: no rise in progress
             self._reset_onset_search()
+            self._calm_c = center
             return []
-        if speed < self.onset_speed:
+        if speed < self._on_thr:
             self._hold_start = None
             return []
         if self._cross_t is None:
             self._cross_t = t
         if self._hold_start is None:
             self._hold_start = t
-        if t - self._hold_start < self.onset_hold - _SLACK:
+        if t - self._hold_start < self.onset_hold - _SLACK or not self._rest_known():
             return []
         # Confirmed. The hand left rest before the speed first crossed onset_speed.
         lo = max(self._stream_start, self._last_end, t - self.max_backdate)
+        if self._on_thr > self.onset_speed and self._calm_c is not None:
+            # A drifting rest: the hand left it after it was last as slow as at rest.
+            lo = max(lo, self._calm_c - self.speed_window)
         hi = max(lo, self._cross_t)
         t0 = self._fit_between(lo, hi, hi, reverse=False)
         self._moving = True
+        self._pending.clear()           # the rise, not rest
         self._reset_onset_search()
         self._reset_end_search()
         self._fast_c = center
@@ -343,11 +444,11 @@ class MotionSegmenter:
         return [Event('onset', t0)]
 
     def _search_end(self, t, speed, center):
-        if speed >= self.onset_speed:
+        if speed >= self._on_thr:
             self._fast_c = center
             self._rest_start_t = None
             return []
-        if speed >= self.end_speed:
+        if speed >= self._end_thr:
             self._rest_start_t = None
             return []
         if self._rest_start_t is None:
@@ -368,9 +469,11 @@ class MotionSegmenter:
         if len(rows) < 4:
             return fallback
         a = np.array(rows)
+        # A rest that moves (the rest level, not the floor, sets the threshold) is a drift.
+        drift = self._on_thr > self.onset_speed
         if not reverse:
-            return fit_cubic_onset(a[:, 0], a[:, 1:], lo, hi)
-        return -fit_cubic_onset(-a[::-1, 0], a[::-1, 1:], -hi, -lo)
+            return fit_cubic_onset(a[:, 0], a[:, 1:], lo, hi, drift=drift)
+        return -fit_cubic_onset(-a[::-1, 0], a[::-1, 1:], -hi, -lo, drift=drift)
 
 
 def segment_motion(t, positions, **params) -> Tuple[float, float]:
@@ -409,5 +512,67 @@ def segment_motion(t, positions, **params) -> Tuple[float, float]:
                 return onset, ev.time
     if onset is None:
         raise ValueError(f'segment_motion: no movement found in {tv.size} valid samples '
-                         f'(speed never stayed >= {seg.onset_speed} m/s for {seg.onset_hold} s)')
+                         f'(speed never stayed >= {seg.onset_threshold:.3g} m/s for '
+                         f'{seg.onset_hold} s after {seg.rest_min} s of rest)')
     return onset, seg.finish()[0].time
+
+
+def sensor_resolution(values) -> float:
+    """The smallest step between distinct values of a recorded signal (its quantisation), NaN
+    ignored; 0 for fewer than two distinct values."""
+    v = np.unique(np.asarray(values, dtype=float)[~np.isnan(values)])
+    d = np.diff(v)
+    d = d[d > 1e-12 * max(1.0, float(np.max(np.abs(v))) if v.size else 1.0)]
+    return float(d.min()) if d.size else 0.0
+
+
+def segment_rest_deviation(t, Y, rest_window: float = 0.1, noise_factor: float = 4.0,
+                           hold: float = 0.05):
+    """Onset and end of a movement recorded between two rests, for signals whose rest is a
+    level (an accelerometer at rest reads gravity) rather than a position at rest with zero
+    speed (:class:`MotionSegmenter`). Any number of DOFs; (onset time, end time).
+
+    Relative to the recording's own rest and sensor, never a fixed threshold: per DOF the rest
+    level is the median of the first ``rest_window`` seconds, its noise the larger of their
+    robust spread (1.4826 MAD) and the sensor's quantisation noise (resolution / sqrt(12), the
+    resolution read off the recorded values). The onset is the first sample that starts
+    ``hold`` seconds of deviation above ``noise_factor`` noise levels (in any DOF), dated back to
+    the last sample within one noise level of rest; it uses only samples up to the confirming
+    one, so an online detector finds the same onset. The end is the same rule on the reversed
+    recording with the rest level of its last ``rest_window`` seconds. A recording without
+    such a deviation at either end is taken whole there (it starts or ends mid-movement).
+    """
+    t = np.asarray(t, dtype=float)
+    Y = np.asarray(Y, dtype=float)
+    if Y.ndim == 1:
+        Y = Y[:, None]
+    if t.ndim != 1 or Y.shape[0] != t.size or t.size < 4:
+        raise ValueError(f'segment_rest_deviation: need at least 4 samples and one row per time, '
+                         f'got t {t.shape}, Y {Y.shape}')
+    if np.any(np.diff(t) <= 0) or not np.all(np.isfinite(t)):
+        raise ValueError('segment_rest_deviation: t must be finite and strictly increasing')
+    if not np.all(np.isfinite(Y)):
+        raise ValueError('segment_rest_deviation: Y contains NaN or Inf')
+    floor = np.array([sensor_resolution(Y[:, j]) for j in range(Y.shape[1])]) / np.sqrt(12.0)
+    period = float(np.median(np.diff(t)))
+    n_rest = max(3, int(round(rest_window / period)))
+    n_hold = max(1, int(round(hold / period)))
+
+    def first_onset(Z):
+        head = Z[:n_rest]
+        level = np.median(head, axis=0)
+        noise = np.maximum(1.4826 * np.median(np.abs(head - level), axis=0), floor)
+        noise = np.where(noise > 0, noise, 1e-12 * np.maximum(1.0, np.abs(level)))
+        dev = np.max(np.abs(Z - level) / noise, axis=1)
+        above = dev > noise_factor
+        run = np.convolve(above, np.ones(n_hold), mode='valid') >= n_hold   # run starting at i
+        if not run.any():
+            return 0
+        i = int(np.argmax(run))
+        calm = np.flatnonzero(dev[:i] <= 1.0)
+        return int(calm[-1]) if calm.size else 0
+    on = first_onset(Y)
+    end = Y.shape[0] - 1 - first_onset(Y[::-1])
+    if end <= on:
+        return float(t[0]), float(t[-1])
+    return float(t[on]), float(t[end])

@@ -24,7 +24,7 @@ from typing import NamedTuple, Optional, Sequence
 
 import numpy as np
 
-from mixture_ip_ros.core.demonstration import Demonstration
+from mixture_ip_ros.core.demonstration import Demonstration, Layout
 from mixture_ip_ros.core.frames import FrameTransform
 from mixture_ip_ros.core.segmentation import segment_motion
 from mixture_ip_ros.robot.description import JOINT_NAMES
@@ -32,6 +32,17 @@ from mixture_ip_ros.io.bags import (JOINT_TOPIC, WRIST_TOPIC, BagError,
                                       RawRecording, read_bag)
 
 logger = logging.getLogger(__name__)
+
+WRIST_NAMES = ('wrist_x', 'wrist_y', 'wrist_z')
+# m: the online observation noise of a motion-captured wrist (MixtureIProMP's
+# observation_noise), the marker noise plus the hand's departure from a smooth ProMP path.
+WRIST_OBSERVATION_NOISE = 0.01
+
+
+def bag_layout(joint_names: Sequence[str] = JOINT_NAMES) -> Layout:
+    """The layout of a demonstration loaded from a bag: the wrist position in the robot base
+    frame (metres) observed, the robot's joints (radians) controlled."""
+    return Layout(WRIST_NAMES, tuple(joint_names), ('m',), ('rad',))
 
 
 def resample_wrist(t_src: np.ndarray, xyz_src: np.ndarray, t_query: np.ndarray,

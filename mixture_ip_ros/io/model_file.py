@@ -3,6 +3,11 @@
 Loading validates everything a consumer relies on (format version, shapes, finite values,
 symmetric positive definite covariances, a probability vector of component weights) and
 refuses a mismatched or corrupt file with a ModelFileError naming the file and the problem.
+
+The metadata names every DOF and its unit, in column order: ``observed_names``,
+``observed_units`` (P each), ``controlled_names``, ``controlled_units`` (Q each, Q >= 0);
+``load_model(path)[1]`` returns it, :func:`model_layout` as a Layout. Format 1 files (wrist +
+iiwa only, before units were recorded) load with units 'm' and 'rad'.
 """
 
 import json
@@ -13,13 +18,15 @@ import numpy as np
 
 from mixture_ip_ros import __version__
 from mixture_ip_ros.core.basis import GaussianBasis
+from mixture_ip_ros.core.demonstration import Layout
 from mixture_ip_ros.core.mixture import MixtureIProMP
 
 FORMAT = 'mixture_ip_ros/mixture-iprompt'
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+_READABLE_VERSIONS = (1, 2)
 _PARAMS = ('n_components', 'n_basis', 'method', 'ridge', 'prior_strength', 'prior_scale',
-           'max_iter', 'tol', 'n_init', 'random_state', 'observation_noise',
-           'min_alpha_rel_std')
+           'max_iter', 'tol', 'n_init', 'random_state', 'observation_noise', 'noise',
+           'noise_var')
 _ARRAYS = ('weights', 'means', 'covariances', 'noise_var', 'alpha_mean', 'alpha_std',
            'prior_cov')
 
@@ -28,20 +35,39 @@ class ModelFileError(ValueError):
     pass
 
 
-def save_model(path, model: MixtureIProMP, *, observed_names, controlled_names,
+def _jsonable_param(v):
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
+
+
+def save_model(path, model: MixtureIProMP, *, layout: Layout = None, observed_names=None,
+               controlled_names=None, observed_units=None, controlled_units=None,
                observed_frame='iiwa_link_0', component_labels=None, extra=None):
-    """Write ``model`` to ``path`` (.npz). Names are the DOF names consumers check against."""
+    """Write ``model`` to ``path`` (.npz). The DOF names (and units) consumers check against
+    come from ``layout`` or from the name/unit lists (units default to '' = unspecified)."""
     model._check_fitted()
-    if len(observed_names) != model.n_observed_ or len(controlled_names) != model.n_controlled_:
+    if layout is None:
+        if observed_names is None or controlled_names is None:
+            raise ValueError('save_model needs a layout or observed_names and controlled_names')
+        layout = Layout(tuple(observed_names), tuple(controlled_names), observed_units,
+                        controlled_units)
+    if len(layout.observed) != model.n_observed_ or len(layout.controlled) != model.n_controlled_:
         raise ValueError(f'need {model.n_observed_} observed and {model.n_controlled_} controlled '
-                         f'names, got {len(observed_names)} and {len(controlled_names)}')
+                         f'names, got {len(layout.observed)} and {len(layout.controlled)}')
     meta = {
         'format': FORMAT, 'format_version': FORMAT_VERSION, 'package_version': __version__,
         'basis': model.basis_.to_dict(),
         'n_observed': model.n_observed_, 'n_controlled': model.n_controlled_,
-        'observed_names': list(observed_names), 'controlled_names': list(controlled_names),
+        'observed_names': list(layout.observed), 'controlled_names': list(layout.controlled),
+        'observed_units': list(layout.observed_units),
+        'controlled_units': list(layout.controlled_units),
         'observed_frame': observed_frame,
-        'params': {p: getattr(model, p) for p in _PARAMS},
+        'params': {p: _jsonable_param(getattr(model, p)) for p in _PARAMS},
+        'classes': (None if getattr(model, 'classes_', None) is None
+                    else [_jsonable_param(c) for c in model.classes_]),
         'component_labels': list(component_labels) if component_labels is not None else None,
         'log_likelihood': [float(v) for v in model.log_likelihood_],
         'extra': extra or {},
@@ -78,9 +104,12 @@ def load_model(path, *, observed_names=None, controlled_names=None):
         fail(f'metadata is not JSON ({e})')
     if meta.get('format') != FORMAT:
         fail(f"not a mixture_ip_ros model (format {meta.get('format')!r})")
-    if meta.get('format_version') != FORMAT_VERSION:
+    if meta.get('format_version') not in _READABLE_VERSIONS:
         fail(f"format version {meta.get('format_version')} is not supported "
-             f'(this package reads {FORMAT_VERSION})')
+             f'(this package reads {", ".join(map(str, _READABLE_VERSIONS))})')
+    if meta['format_version'] == 1:       # wrist (m) + robot joints (rad) only
+        meta.setdefault('observed_units', ['m'] * len(meta.get('observed_names', [])))
+        meta.setdefault('controlled_units', ['rad'] * len(meta.get('controlled_names', [])))
     missing = [a for a in _ARRAYS if a not in data]
     if missing:
         fail(f'missing arrays {missing}')
@@ -95,8 +124,9 @@ def load_model(path, *, observed_names=None, controlled_names=None):
     except (KeyError, TypeError, ValueError) as e:
         fail(f'incomplete metadata ({e})')
     d = (P + Q) * basis.n_basis
+    noise_shape = (K, P + Q) if params.get('noise') == 'per_component' else (P + Q,)
     expected = {'weights': (K,), 'means': (K, d), 'covariances': (K, d, d),
-                'noise_var': (P + Q,), 'alpha_mean': (K,), 'alpha_std': (K,),
+                'noise_var': noise_shape, 'alpha_mean': (K,), 'alpha_std': (K,),
                 'prior_cov': (d, d)}
     for name, shape in expected.items():
         if data[name].shape != shape:
@@ -114,6 +144,10 @@ def load_model(path, *, observed_names=None, controlled_names=None):
             np.linalg.cholesky(C)
         except np.linalg.LinAlgError:
             fail(f'covariance {k} is not positive definite')
+    for key, n in (('observed_names', P), ('controlled_names', Q), ('observed_units', P),
+                   ('controlled_units', Q)):
+        if not isinstance(meta.get(key), list) or len(meta[key]) != n:
+            fail(f'{key} must list {n} entries, got {meta.get(key)!r}')
     for key, given in (('observed_names', observed_names), ('controlled_names', controlled_names)):
         if given is not None and list(given) != meta.get(key):
             fail(f'{key} {meta.get(key)} do not match the expected {list(given)}')
@@ -123,4 +157,11 @@ def load_model(path, *, observed_names=None, controlled_names=None):
     for name in _ARRAYS:
         setattr(model, name + '_', data[name])
     model.log_likelihood_ = meta.get('log_likelihood', [])
+    model.classes_ = meta.get('classes')
     return model, meta
+
+
+def model_layout(meta) -> Layout:
+    """The names and units of every DOF recorded in a model file's metadata."""
+    return Layout(tuple(meta['observed_names']), tuple(meta['controlled_names']),
+                  tuple(meta['observed_units']), tuple(meta['controlled_units']))

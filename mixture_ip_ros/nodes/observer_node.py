@@ -108,6 +108,19 @@ class ObserverParameters:
     max_backdate: float = _segmenter('max_backdate', 's, the latest an onset can be dated '
                                                      'before its detection', low=0.0,
                                      high=60.0, check=positive, rule='> 0')
+    rest_window: float = _segmenter('rest_window', 's of rest speeds whose level and spread '
+                                                   'raise the thresholds above their floors',
+                                    low=0.0, high=600.0, check=positive, rule='> 0')
+    onset_noise_factor: float = _segmenter('onset_noise_factor', 'onset threshold: max('
+                                                                 'onset_speed, rest level + '
+                                                                 'this many spreads)',
+                                           low=0.0, high=1000.0, check=positive, rule='> 0')
+    end_noise_factor: float = _segmenter('end_noise_factor', 'end threshold: max(end_speed, '
+                                                             'rest level + this many spreads)',
+                                         low=0.0, high=1000.0, check=positive, rule='> 0')
+    rest_min: float = _segmenter('rest_min', 's of measured rest before an onset can be '
+                                             'confirmed (0: none)', low=0.0, high=600.0,
+                                 rule='<= rest_window')
     input_queue_depth: int = param(100, 'mocap subscription depth (best effort)', low=1,
                                    high=1_000_000)
     output_queue_depth: int = param(1000, 'reliable outputs: 2 s of 500 Hz mocap', low=1,

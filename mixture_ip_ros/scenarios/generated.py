@@ -58,6 +58,9 @@ LABEL_FILE = 'labels.json'
 HUMAN_REST = np.array([1.22, 0.24, 0.08])
 REST_JITTER = 0.015          # m, rest position differs between demonstrations
 MOCAP_NOISE = 0.001          # m, white noise per axis
+# Letter units (letter height ~2): the online observation noise of a hand-drawn letter
+# (MixtureIProMP's observation_noise), the pen's departure from a smooth ProMP path.
+LETTER_OBSERVATION_NOISE = 0.01
 RATE = 100.0                 # Hz, mocap and joint_states
 REST_BEFORE = (0.3, 0.5)     # s of stillness before the onset
 REST_AFTER = (0.4, 0.6)      # s after the end (the end detector needs ~0.3 s of rest)

@@ -67,7 +67,7 @@ def box_components_and_posterior(path, model, demos, comp_labels, example, n_joi
     zg = np.linspace(0, 1, 100)
     fig, axes = plt.subplots(2, len(dofs), figsize=(2.3 * len(dofs), 5.4), constrained_layout=True)
     for d in demos:
-        z = d.t / d.duration
+        z = d.phase
         Y = np.hstack([d.observed, d.controlled])
         for c, j in enumerate(dofs):
             axes[0, c].plot(z, Y[:, j], color='0.75', lw=0.5, zorder=0)
@@ -95,7 +95,7 @@ def box_components_and_posterior(path, model, demos, comp_labels, example, n_joi
         _, mean, cov = fold_model.condition(z_obs, y_obs, component=k)
         dist = trajectory_distribution(mean, cov, fold_model.basis_, zg, dofs=dofs)
         sd = np.sqrt(np.maximum(np.einsum('tii->ti', dist['position_cov']), 0))
-        z = test.t / test.duration
+        z = test.phase
         Y = np.hstack([test.observed, test.controlled])
         for c, j in enumerate(dofs):
             ax = axes[1, c]
@@ -324,3 +324,73 @@ def missing_data(path_rms, path_ll, path_recon, fractions, R_em, R_reg, ll, comp
     fig.suptitle(f'Training letter {demo.name} with {int(np.isnan(demo.observed[:, 0]).sum())} '
                  'missing samples', fontsize=10)
     _save(fig, path_recon)
+
+
+def accuracy_vs_fraction(path, fractions, curves, levels, title, chance=None):
+    """Accuracy of every method vs the fraction of the movement observed. ``curves``: {name:
+    accuracies per fraction}; ``levels``: {name: one accuracy} of methods that see the whole
+    series (drawn as horizontal lines)."""
+    fig, ax = plt.subplots(figsize=(10.5, 4.6), constrained_layout=True)
+    markers = 'osd^v<>'
+    for i, (name, acc) in enumerate(curves.items()):
+        ax.plot(100 * np.asarray(fractions), 100 * np.asarray(acc, dtype=float),
+                marker=markers[i % len(markers)], color=f'C{i}', label=name)
+    for j, (name, acc) in enumerate(levels.items()):
+        ax.axhline(100 * acc, color=f'C{len(curves) + j}', ls='--', lw=1.5,
+                   label=f'{name} (whole series)')
+    if chance is not None:
+        ax.axhline(100 * chance, color='0.6', ls=':', lw=1, label='chance')
+    ax.set_xlabel('observed part of the movement [%]')
+    ax.set_ylabel('accuracy [%]')
+    ax.set_ylim(0, 100)
+    ax.set_xticks(100 * np.asarray(fractions))
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=8, loc='center left', bbox_to_anchor=(1.01, 0.5))
+    ax.grid(alpha=0.3)
+    _save(fig, path)
+
+
+def clusters_vs_labels(path, counts, component_names, class_names, title):
+    """How the training demonstrations of each class (columns) fall into the unsupervised
+    components (rows): a count matrix."""
+    counts = np.asarray(counts)
+    fig, ax = plt.subplots(figsize=(max(5.0, 1.6 + 0.55 * len(class_names)),
+                                    max(3.2, 1.4 + 0.42 * len(counts))),
+                           constrained_layout=True)
+    im = ax.imshow(counts, cmap='Blues', aspect='auto')
+    for (r, c), v in np.ndenumerate(counts):
+        if v:
+            ax.text(c, r, str(v), ha='center', va='center', fontsize=8,
+                    color='white' if v > 0.6 * counts.max() else 'black')
+    ax.set_xticks(range(len(class_names)))
+    ax.set_xticklabels(class_names)
+    ax.set_yticks(range(len(counts)))
+    ax.set_yticklabels([f'{k}: {n}' for k, n in enumerate(component_names)], fontsize=8)
+    ax.set_xlabel('true class (not used in fitting)')
+    ax.set_ylabel('component: majority class')
+    ax.set_title(title, fontsize=10)
+    fig.colorbar(im, ax=ax, shrink=0.8, label='training demonstrations')
+    _save(fig, path)
+
+
+def loglik_vs_k(path, candidates, scores, chosen, title, note=''):
+    """Cross-validated held-out log-likelihood per demonstration vs K, relative to the first
+    candidate (paired), mean +- standard error."""
+    s = np.asarray(scores, dtype=float)
+    d = s - s[0]
+    mean = d.mean(axis=1)
+    se = d.std(axis=1, ddof=1) / np.sqrt(d.shape[1])
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
+    ax.errorbar(candidates, mean, yerr=se, fmt='o-', capsize=4, color='k',
+                label='mean +- s.e. over held-out demonstrations')
+    i = list(candidates).index(chosen)
+    ax.plot([chosen], [mean[i]], 'o', ms=12, mfc='none', mec='tab:red', mew=2,
+            label=f'selected K = {chosen}')
+    ax.set_xlabel('number of mixture components K')
+    ax.set_ylabel(f'held-out log-likelihood - that of K = {candidates[0]} [nats]')
+    ax.set_xticks(list(candidates))
+    import textwrap
+    ax.set_title('\n'.join([title] + textwrap.wrap(note, 90)), fontsize=9)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    _save(fig, path)

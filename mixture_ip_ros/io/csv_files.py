@@ -1,0 +1,124 @@
+"""Demonstrations from CSV files: one file per demonstration, a header row, a time column and
+one column per DOF, e.g.
+
+    t,x,y,z,q1,q2
+    0.00,0.41,0.02,0.30,0.1,-0.2
+    0.01,0.42,0.02,0.31,0.1,-0.2
+
+Each file is one movement: its first row is the onset (times are taken relative to it, in
+seconds) and its last row the end. Every row is kept: an empty or NaN cell in every column of
+an agent marks that agent's sample as missing (an occlusion), never dropped; anything else that
+is not a number is an error. Errors name the file and the line, in one line.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from mixture_ip_ros.core.demonstration import Demonstration, Layout
+
+
+class CsvError(ValueError):
+    """A CSV file that cannot be read as a demonstration."""
+
+
+def _number(cell: str, path, line: int, column: str) -> float:
+    cell = cell.strip()
+    if cell == '' or cell.lower() == 'nan':
+        return np.nan
+    try:
+        value = float(cell)
+    except ValueError:
+        raise CsvError(f'{path}, line {line}: column {column!r} is not a number: {cell!r}') from None
+    if not np.isfinite(value):
+        raise CsvError(f'{path}, line {line}: column {column!r} is {cell!r}')
+    return value
+
+
+def read_csv_demonstration(path, layout: Layout, time: str = 't') -> Demonstration:
+    """One CSV file -> one Demonstration with ``layout``'s columns (see the module docstring).
+    Raises CsvError with the file and line of the first problem."""
+    path = Path(path)
+    try:
+        with open(path, newline='') as f:
+            rows = list(csv.reader(f))
+    except (OSError, UnicodeDecodeError, csv.Error) as e:
+        raise CsvError(f'{path}: cannot be read ({e})') from None
+    if not rows:
+        raise CsvError(f'{path}: empty file')
+    header = [h.strip() for h in rows[0]]
+    wanted = [time, *layout.observed, *layout.controlled]
+    missing = [c for c in wanted if c not in header]
+    if missing:
+        raise CsvError(f'{path}: no column {", ".join(map(repr, missing))} (columns: '
+                       f'{", ".join(header)})')
+    index = [header.index(c) for c in wanted]
+    data = []
+    for line, row in enumerate(rows[1:], start=2):
+        if not row or all(not c.strip() for c in row):
+            raise CsvError(f'{path}, line {line}: empty row')
+        if len(row) != len(header):
+            raise CsvError(f'{path}, line {line}: {len(row)} cells for {len(header)} columns')
+        data.append([_number(row[i], path, line, c) for i, c in zip(index, wanted)])
+    if len(data) < 2:
+        raise CsvError(f'{path}: needs at least 2 rows of samples, got {len(data)}')
+    a = np.array(data)
+    t = a[:, 0]
+    P = len(layout.observed)
+    for k in range(len(t)):
+        if np.isnan(t[k]):
+            raise CsvError(f'{path}, line {k + 2}: time column {time!r} is empty')
+        if k and t[k] <= t[k - 1]:
+            raise CsvError(f'{path}, line {k + 2}: time {t[k]:g} does not increase (previous '
+                           f'{t[k - 1]:g})')
+    for agent, block in (('observed', a[:, 1:1 + P]), ('controlled', a[:, 1 + P:])):
+        partial = np.isnan(block).any(axis=1) & ~np.isnan(block).all(axis=1)
+        if partial.any():
+            k = int(np.argmax(partial))
+            names = getattr(layout, agent)
+            empty = [n for n, v in zip(names, block[k]) if np.isnan(v)]
+            raise CsvError(f'{path}, line {k + 2}: {agent} columns {", ".join(empty)} are empty '
+                           f'but not the others (a missing sample is empty in every column)')
+    if np.isnan(a[:, 1:1 + P]).all():
+        raise CsvError(f'{path}: no observed sample (every observed cell is empty)')
+    return Demonstration(t - t[0], a[:, 1:1 + P], a[:, 1 + P:], name=path.name)
+
+
+def load_csv_dataset(folder, layout: Layout, time: str = 't') -> list:
+    """Every ``*.csv`` file in ``folder`` (sorted by name) as a Demonstration. Raises CsvError
+    for the first bad file, ValueError if there is none."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise ValueError(f'CSV folder {folder} does not exist or is not a directory')
+    files = sorted(folder.glob('*.csv'))
+    if not files:
+        raise ValueError(f'no .csv files in {folder}')
+    return [read_csv_demonstration(f, layout, time) for f in files]
+
+
+def write_csv_demonstration(path, demo: Demonstration, layout: Layout, time: str = 't'):
+    """The inverse of :func:`read_csv_demonstration` (missing samples as empty cells)."""
+    layout.check([demo])
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    a = np.column_stack([demo.t, demo.observed, demo.controlled])
+    with open(path, 'w', newline='') as f:
+        w = csv.writer(f)
+        w.writerow([time, *layout.observed, *layout.controlled])
+        for row in a:
+            w.writerow(['' if np.isnan(v) else repr(float(v)) for v in row])
+    return path
+
+
+def parse_names(text: str | None, what: str) -> Sequence[str]:
+    """'x,y,z' -> ('x', 'y', 'z') for the command line; '' or None -> ()."""
+    if not text:
+        return ()
+    names = tuple(n.strip() for n in text.split(','))
+    if any(not n for n in names):
+        raise ValueError(f'{what}: empty name in {text!r}')
+    return names

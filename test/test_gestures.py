@@ -1,0 +1,75 @@
+"""Real human motion: PickupGestureWiimoteZ (fetched from the aeon wheel) through the gesture
+evaluation, on a CI-sized subset (4 of the 10 people), with its baselines; the .ts reader and the
+rest-deviation segmentation on their own."""
+
+import json
+
+import numpy as np
+import pytest
+
+from mixture_ip_ros.app.evaluation import evaluate
+from mixture_ip_ros.core.segmentation import segment_rest_deviation, sensor_resolution
+from mixture_ip_ros.io.ucr import read_ts
+
+from test_evaluation import assert_real_pngs
+
+KEYS = ('n_components_selected', 'unsupervised_accuracy_by_fraction',
+        'unsupervised_accuracy_phase_known_by_fraction', 'supervised_accuracy_by_fraction',
+        'baseline_promp_accuracy_by_fraction', 'baseline_sklearn_gmm_accuracy',
+        'baseline_dtw_accuracy')
+
+
+@pytest.fixture(scope='module')
+def quick_gestures(tmp_path_factory):
+    out = tmp_path_factory.mktemp('gestures')
+    return out, evaluate('gestures', out, quick=True)
+
+
+def test_gesture_evaluation_reports_every_method_on_the_same_split(quick_gestures):
+    out, m = quick_gestures
+    assert all(k in m for k in KEYS)
+    assert m['n_train'] == 20 and m['n_test'] == 20 and m['n_classes'] == 4
+    assert m['source'].startswith('PickupGestureWiimoteZ')
+    for key in KEYS[1:5]:
+        assert set(m[key]) == {'0.3', '0.5', '0.7', '1'}, key
+        assert all(0 <= v <= 1 for v in m[key].values()), key
+    # Accuracies are multiples of 1/20 (20 test gestures): numbers, not placeholders.
+    assert np.allclose(np.array(list(m['supervised_accuracy_by_fraction'].values())) * 20 % 1, 0)
+    # The DTW baseline is far above chance on real data (a sanity check of the data and split).
+    assert m['baseline_dtw_accuracy'] > 2 * m['chance_accuracy']
+    # The choice of K comes with its curve and a verdict on it.
+    sel = m['k_selection']
+    assert len(sel['mean_nats']) == len(sel['candidates']) == 6
+    assert isinstance(sel['clear_optimum'], bool) and sel['note']
+    assert m['n_components_selected'] in sel['candidates']
+    assert len(m['component_labels']) == m['n_components_selected']
+    # Labels never reach the unsupervised fit: every training gesture is in one component.
+    assert np.sum(m['clusters_vs_labels']['counts']) == 20
+    assert json.loads((out / 'metrics.json').read_text()) == m
+    assert_real_pngs(out, m['plots'])
+
+
+def test_ts_reader_reads_unequal_lengths_and_labels(tmp_path):
+    (tmp_path / 'x.ts').write_text('# comment\n@problemName X\n@univariate true\n'
+                                   '@classLabel true a b\n@data\n1,2,3:a\n4,5:b\n')
+    d = read_ts(tmp_path / 'x.ts')
+    assert [s.ravel().tolist() for s in d.series] == [[1, 2, 3], [4, 5]]
+    assert d.labels == ['a', 'b'] and d.header['problemname'] == 'X'
+    (tmp_path / 'y.ts').write_text('@classLabel true a\n@data\n1,x:a\n')
+    with pytest.raises(ValueError, match=r'y\.ts, line 3: not a number'):
+        read_ts(tmp_path / 'y.ts')
+
+
+def test_rest_deviation_segmentation_is_relative_to_rest_level_and_resolution():
+    rng = np.random.default_rng(0)
+    step = 0.04                                           # a quantised sensor at rest on 1 g
+    t = np.arange(300) / 100.0
+    y = np.full(300, 1.0)
+    y[100:200] += 0.6 * np.sin(np.pi * (t[100:200] - 1.0))   # the movement: 1.0 s .. 2.0 s
+    y[200:] = 0.7                                          # rest again, at another level
+    y = np.round((y + rng.normal(0, 0.01, 300)) / step) * step
+    assert sensor_resolution(y) == pytest.approx(step)
+    on, end = segment_rest_deviation(t, y)
+    assert 0.9 <= on <= 1.1 and 1.9 <= end <= 2.1
+    # Ten times the scale (another unit): the same times, nothing is a fixed threshold.
+    assert segment_rest_deviation(t, 10 * y) == (on, end)

@@ -1,0 +1,217 @@
+"""Any agent layout (observed >= 1 DOF, controlled >= 0) through Demonstration, training, the
+model file, the command line and the online estimator; K for every layout; the tied noise."""
+
+import json
+
+import numpy as np
+import pytest
+
+from mixture_ip_ros.app.cli import main
+from mixture_ip_ros.app.training import train, train_to_file
+from mixture_ip_ros.core.basis import GaussianBasis
+from mixture_ip_ros.core.demonstration import Demonstration, Layout
+from mixture_ip_ros.core.mixture import (MixtureIProMP, heldout_loglik_by_components,
+                                         loo_rms_by_components, selection_curve)
+from mixture_ip_ros.core.online import OnlineEstimator
+from mixture_ip_ros.core.promp import observation_stats
+from mixture_ip_ros.io.csv_files import CsvError, load_csv_dataset, write_csv_demonstration
+from mixture_ip_ros.io.model_file import load_model, model_layout
+
+from mixture_ip_ros.scenarios.synthetic import mixture_demos
+
+
+def _layout(P, Q):
+    return Layout(tuple(f'o{i}' for i in range(P)), tuple(f'c{j}' for j in range(Q)),
+                  ('m',) * P, ('rad',) * Q)
+
+
+@pytest.mark.parametrize('P, Q', [(1, 0), (2, 0), (1, 2), (4, 1), (3, 7)])
+def test_layout_trains_saves_loads_and_recognises_online(tmp_path, P, Q):
+    demos, labels, _, _ = mixture_demos(seed=4, n_obs=P, n_ctrl=Q)
+    layout = _layout(P, Q)
+    model, info = train_to_file(demos, tmp_path / 'm.npz', layout=layout, candidates=(1, 2, 3, 4),
+                                n_basis=8)
+    assert info['n_components'] == 3 and info['selection']['clear_optimum']
+    assert info['selection']['criterion'] == ('loo' if Q else 'loglik')
+    assert info['selection']['heldout_loglik']['chosen'] == 3
+    loaded, meta = load_model(tmp_path / 'm.npz', observed_names=layout.observed,
+                              controlled_names=layout.controlled)
+    assert model_layout(meta) == layout
+    assert meta['observed_units'] == ['m'] * P and meta['controlled_units'] == ['rad'] * Q
+    correct = []
+    for i in range(0, len(demos), 3):
+        d = demos[i]
+        a, b = OnlineEstimator(model), OnlineEstimator(loaded)
+        for t, y in zip(d.t[:len(d.t) // 2], d.observed[:len(d.t) // 2]):
+            a.update(t, y)
+            b.update(t, y)
+        assert np.array_equal(a.joint_posterior(), b.joint_posterior())
+        k = int(np.argmax(b.component_posterior()))
+        correct.append(k == int(np.argmax(model.resp_[i])))
+        pred = b.predict([0.5, 1.0])
+        assert pred['controlled']['position'].shape == (2, Q)
+        assert pred['observed']['position'].shape == (2, P)
+        rest, cov = b.predict_at_rest(d.observed[-1])
+        assert rest.shape == (Q,) and cov.shape == (Q, Q)
+        # a single-agent model predicts the observed agent's rest from half the movement
+        if Q == 0:
+            assert np.sqrt(np.mean((pred['observed']['position'][1] - d.observed[-1]) ** 2)) < 0.1
+    assert np.mean(correct) == 1.0
+
+
+def test_demonstration_accepts_1d_arrays_and_no_controlled_agent():
+    d = Demonstration(np.linspace(0, 1, 11), np.arange(11.0))
+    assert d.observed.shape == (11, 1) and d.controlled.shape == (11, 0)
+    assert d.n_controlled_dofs == 0 and d.phase[-1] == 1.0
+    with pytest.raises(ValueError, match=r't must start at the onset.*t\[0\] = 1'):
+        Demonstration(np.linspace(1, 6, 11), np.arange(11.0))
+    with pytest.raises(ValueError, match='at least one DOF'):
+        Demonstration(np.linspace(0, 1, 11), np.zeros((11, 0)))
+
+
+@pytest.mark.parametrize('Q', [0, 3])
+def test_heldout_loglik_finds_the_sampled_number_of_components(Q):
+    demos = mixture_demos(seed=5, n_obs=2, n_ctrl=Q)[0]
+    ll = heldout_loglik_by_components(demos, [1, 2, 3, 4, 5], n_basis=8)
+    curve = selection_curve(ll, higher_is_better=True, paired=True)
+    assert [1, 2, 3, 4, 5][curve['index']] == 3 and curve['clear']
+
+
+def test_leave_one_out_finds_the_sampled_number_of_components_and_needs_a_controlled_agent():
+    demos = mixture_demos(seed=5, n_obs=2, n_ctrl=3)[0][::2]
+    rms = loo_rms_by_components(demos, [1, 2, 3, 4], n_basis=8)
+    assert [1, 2, 3, 4][selection_curve(rms)['index']] == 3
+    with pytest.raises(ValueError, match='needs a controlled agent'):
+        loo_rms_by_components(mixture_demos(seed=5, n_ctrl=0)[0], [1, 2], n_basis=8)
+
+
+def test_one_sampled_component_gives_k1_and_a_flat_curve_is_reported_as_unclear():
+    demos = mixture_demos(seed=6, counts=(30,), durations=((1.0, 1.6),), n_ctrl=0)[0]
+    model, info = train(demos, candidates=(1, 2, 3), n_basis=8)
+    sel = info['selection']
+    assert sel['criterion'] == 'loglik' and sel['chosen'] == 1
+    assert sel['heldout_loglik']['candidates'] == [1, 2, 3]
+    rng = np.random.default_rng(0)
+    flat = rng.normal(size=(4, 40)) + 100 * rng.normal(size=40)     # per-demo level, no K effect
+    curve = selection_curve(flat, higher_is_better=True, paired=True)
+    assert not curve['clear'] and 'no clear optimum' in curve['note']
+
+
+def test_tied_and_per_component_noise_equal_the_pooled_residuals():
+    demos, labels, basis, _ = mixture_demos(seed=7, n_obs=2, n_ctrl=1)
+    model = MixtureIProMP(3, n_basis=8).fit(demos)
+    per = MixtureIProMP(3, n_basis=8, noise='per_component').fit(demos)
+    sq, m = [], []
+    for d in demos:       # eq. 14 by a dense least-squares solve per DOF, then residuals
+        A = GaussianBasis(8)(d.phase)
+        Y = np.hstack([d.observed, d.controlled])
+        w = np.linalg.solve(A.T @ A + 1e-6 * np.eye(8), A.T @ Y)
+        sq.append(((Y - A @ w) ** 2).sum(axis=0))
+        m.append(np.full(3, len(d.t)))
+    sq, m = np.array(sq), np.array(m)
+    assert np.allclose(model.noise_var_, sq.sum(0) / m.sum(0), rtol=1e-6)
+    r = per.resp_
+    assert np.allclose(per.noise_var_, (r.T @ sq) / (r.T @ m), rtol=1e-6)
+    # Fixed noise: separately fitted models share it exactly.
+    shared = [MixtureIProMP(1, n_basis=8, noise_var=model.noise_var_).fit(
+        [d for d, lb in zip(demos, labels) if lb == k]) for k in range(3)]
+    assert all(np.array_equal(s.noise_var_, model.noise_var_) for s in shared)
+
+
+def test_supervised_fit_has_one_component_per_class_and_scores_weight_vectors():
+    demos, labels, _, _ = mixture_demos(seed=8, n_obs=1, n_ctrl=0)
+    names = np.array(['c', 'a', 'b'])[labels]
+    model = MixtureIProMP(3, n_basis=8).fit(demos, labels=names)
+    assert model.classes_ == ['a', 'b', 'c']
+    assert np.allclose(model.weights_, [np.mean(names == c) for c in model.classes_])
+    W = model.demonstration_weights(demos)
+    pred = np.array(model.classes_)[model.predict(W)]
+    assert np.mean(pred == names) == 1.0
+    assert np.allclose(model.predict_proba(W).sum(axis=1), 1.0)
+    assert model.score_samples(W).shape == (len(demos),)
+    with pytest.raises(ValueError, match='one component per class'):
+        MixtureIProMP(2, n_basis=8).fit(demos, labels=names)
+    with pytest.raises(ValueError, match='weight vectors must have shape'):
+        model.predict(np.zeros((2, 5)))
+
+
+def test_observed_weights_by_ridge_are_the_ones_fit_clusters():
+    demos = mixture_demos(seed=9, n_obs=1, n_ctrl=0)[0]
+    model = MixtureIProMP(3, n_basis=8).fit(demos)
+    st = observation_stats(model.basis_, demos[0].phase, demos[0].observed)
+    w = np.linalg.solve(st.G[0] + 1e-6 * np.eye(8), st.b[0])
+    assert np.allclose(model.demonstration_weights(demos[:1])[0], w)
+
+
+# ---------------------------------------------------------------- CSV files and the command line
+
+def _write_csvs(folder, demos, layout):
+    for i, d in enumerate(demos):
+        write_csv_demonstration(folder / f'demo_{i:02d}.csv', d, layout)
+
+
+def test_train_command_on_csv_files_single_agent(tmp_path):
+    demos = mixture_demos(seed=10, n_obs=2, n_ctrl=0)[0]
+    layout = Layout(('ax', 'ay'), (), ('g',), None)
+    _write_csvs(tmp_path / 'csv', demos, layout)
+    loaded = load_csv_dataset(tmp_path / 'csv', layout)
+    assert all(np.allclose(a.observed, b.observed) and np.allclose(a.t, b.t)
+               for a, b in zip(loaded, demos))
+    out = tmp_path / 'gesture.npz'
+    assert main(['train', '--csv', str(tmp_path / 'csv'), '--observed', 'ax,ay',
+                 '--observed-units', 'g', '--out', str(out), '--max-components', '4',
+                 '--n-basis', '8']) == 0
+    model, meta = load_model(out, observed_names=['ax', 'ay'], controlled_names=[])
+    assert meta['observed_units'] == ['g', 'g'] and model.n_controlled_ == 0
+    sel = meta['extra']['training']['selection']
+    assert sel['criterion'] == 'loglik' and sel['chosen'] == model.n_components == 3
+    est = OnlineEstimator(model)
+    for t, y in zip(demos[0].t, demos[0].observed):
+        est.update(t, y)
+    assert est.n_observations + est.n_skipped == len(demos[0].t)
+
+
+def test_train_command_on_csv_files_with_a_controlled_agent(tmp_path, capsys):
+    demos = mixture_demos(seed=11, n_obs=3, n_ctrl=2)[0]
+    layout = Layout(('x', 'y', 'z'), ('q1', 'q2'))
+    _write_csvs(tmp_path / 'csv', demos, layout)
+    out = tmp_path / 'm.npz'
+    assert main(['train', '--csv', str(tmp_path / 'csv'), '--observed', 'x,y,z',
+                 '--controlled', 'q1,q2', '--out', str(out), '--components', '3',
+                 '--n-basis', '8']) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary['n_components'] == 3 and 'selection' not in summary
+    model, meta = load_model(out, controlled_names=['q1', 'q2'])
+    assert meta['controlled_units'] == ['', '']
+
+
+@pytest.mark.parametrize('text, message', [
+    ('t,x\n0,1\n0.1,2\n', r"a\.csv: no column 'y' \(columns: t, x\)"),
+    ('t,x,y\n0,1,1\n0.2,2,2\n0.1,3,3\n', r'a\.csv, line 4: time 0\.1 does not increase'),
+    ('t,x,y\n0,1,1\n0.1,,2\n', r'a\.csv, line 3: observed columns x are empty but not the others'),
+    ('t,x,y\n0,1,1\n,2,2\n', r"a\.csv, line 3: time column 't' is empty"),
+    ('t,x,y\n0,1,1\n0.1,2,abc\n', r"a\.csv, line 3: column 'y' is not a number: 'abc'"),
+    ('t,x,y\n0,1,1\n0.1,2\n', r'a\.csv, line 3: 2 cells for 3 columns'),
+    ('t,x,y\n0,,\n0.1,,\n', r'a\.csv: no observed sample'),
+])
+def test_csv_errors_are_one_clear_line(tmp_path, text, message):
+    (tmp_path / 'a.csv').write_text(text)
+    with pytest.raises(CsvError, match=message) as e:
+        load_csv_dataset(tmp_path, Layout(('x', 'y')))
+    assert '\n' not in str(e.value)
+
+
+def test_csv_rows_with_every_observed_cell_empty_are_missing_samples_not_dropped(tmp_path):
+    (tmp_path / 'a.csv').write_text('t,x,y\n1.0,1,1\n1.1,,\n1.2,3,3\n')
+    (d,) = load_csv_dataset(tmp_path, Layout(('x', 'y')))
+    assert np.allclose(d.t, [0, 0.1, 0.2]) and np.isnan(d.observed[1]).all()
+
+
+def test_train_command_reports_a_bad_csv_in_one_line(tmp_path, capsys):
+    (tmp_path / 'csv').mkdir()
+    (tmp_path / 'csv' / 'a.csv').write_text('t,x\n0,1\n0.1,2\n')
+    assert main(['train', '--csv', str(tmp_path / 'csv'), '--observed', 'x,y', '--out',
+                 str(tmp_path / 'm.npz')]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith('mixture-ip train: error:') and "no column 'y'" in err
+    assert len(err.splitlines()) == 1
