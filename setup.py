@@ -23,10 +23,10 @@ setup(
     entry_points={
         'console_scripts': [
             'mixture-ip = mixture_ip_ros.app.cli:main',
-            'sim_node = mixture_ip_ros.nodes.sim_node:main',
-            'observer_node = mixture_ip_ros.nodes.observer_node:main',
-            'estimator_node = mixture_ip_ros.nodes.estimator_node:main',
-            'bag_player = mixture_ip_ros.nodes.bag_player:main',
+            'sim_node = mixture_ip_ros.nodes.launch:sim_node',
+            'observer_node = mixture_ip_ros.nodes.launch:observer_node',
+            'estimator_node = mixture_ip_ros.nodes.launch:estimator_node',
+            'bag_player = mixture_ip_ros.nodes.launch:bag_player',
         ],
     },
 )

@@ -123,10 +123,10 @@ def run_node(node_class, args=None, done=None) -> int:
     with ``autostart``), spin until Ctrl-C, an external shutdown or ``done(node)``, and exit 0.
     A node that cannot start (bad parameter, missing or invalid file) logs one line and exits 1,
     without a traceback."""
-    rclpy.init(args=args)
     name = getattr(node_class, 'NODE_NAME', node_class.__name__)
     node = None
     try:
+        rclpy.init(args=args)
         node = node_class()
         if isinstance(node, ManagedNode) and not node.start():
             get_logger(name).fatal(f'refusing to start: {node.refusal}')

@@ -1,0 +1,77 @@
+"""The executables as a user runs them: a bad parameter is one line and exit code 1, and Ctrl-C
+is a clean exit at any moment of a node's life."""
+
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+
+import pytest
+
+from conftest import private_domain_id
+
+BIN = Path(sys.executable).parent
+
+
+def _env():
+    return dict(os.environ, ROS_DOMAIN_ID=str(private_domain_id()))
+
+
+@pytest.mark.parametrize('executable', ['observer_node', 'sim_node', 'bag_player'])
+def test_a_bad_parameter_is_one_line_and_exit_1_for_every_executable(executable):
+    env = dict(os.environ, ROS_DOMAIN_ID=str(private_domain_id()))
+    bad = {'observer_node': 'onset_speed:=nan', 'sim_node': 'publish_rate:=-1.0',
+           'bag_player': 'rate:=0.0'}[executable]
+    proc = subprocess.run([str(Path(sys.executable).parent / executable), '--ros-args', '-p',
+                           bad], capture_output=True, text=True, timeout=60, env=env)
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == 1, out
+    assert 'refusing to start' in out and bad.split(':=')[0] in out, out
+    assert 'Traceback' not in out, out
+
+
+@pytest.fixture(scope='module')
+def model(tmp_path_factory):
+    from mixture_ip_ros.app.training import train_to_file
+    from mixture_ip_ros.scenarios.synthetic import mixture_demos
+    path = tmp_path_factory.mktemp('model') / 'model.npz'
+    train_to_file(mixture_demos(seed=0, n_obs=3, n_ctrl=7, n_basis=8)[0], path,
+                  n_components=3, n_basis=8)
+    return path
+
+
+def _loaded(pid: int, library: str) -> bool:
+    """Whether the process has mapped ``library`` (it is importing or has imported it)."""
+    try:
+        return library in Path(f'/proc/{pid}/maps').read_text()
+    except OSError:
+        return True       # it has exited: nothing left to wait for
+
+
+def _first_line(proc) -> None:
+    while proc.poll() is None and proc.stdout.read(1) not in (b'\n', b''):
+        pass
+
+
+@pytest.mark.parametrize('executable', ['observer_node', 'sim_node', 'estimator_node'])
+def test_ctrl_c_while_starting_and_running_exits_cleanly(executable, model):
+    """Ctrl-C while the node's module is being imported (rclpy's extension already loaded,
+    Pinocchio, MuJoCo or numba not yet), and once it runs: exit code 0, no traceback."""
+    args = {'observer_node': [], 'sim_node': ['-p', 'real_time_factor:=0.0'],
+            'estimator_node': ['-p', f'model_path:={model}']}[executable]
+    for moment in ('importing', 'running'):
+        proc = subprocess.Popen([str(BIN / executable), '--ros-args', *args], env=_env(),
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+        if moment == 'importing':
+            while not _loaded(proc.pid, '_rclpy_pybind11'):
+                pass
+        else:
+            _first_line(proc)
+        proc.send_signal(signal.SIGINT)
+        try:
+            out = proc.communicate(timeout=30)[0].decode(errors='replace')
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            pytest.fail(f'{executable} did not stop on Ctrl-C {moment}')
+        assert proc.returncode == 0 and 'Traceback' not in out, (moment, out)
