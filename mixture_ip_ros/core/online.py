@@ -4,7 +4,8 @@ alpha, updated recursively per observation, and the conditioned controlled-agent
 
 Each hypothesis (k, alpha_m) keeps the Gaussian over the observed agent's weights given D and
 its log evidence log p(D | k, alpha_m) (eqs. 17-18), updated in Kalman form in O(P d^2) per
-observation. The basis rows psi(alpha_m t) are computed once per alpha and shared by every
+observation (core/_kalman: hypotheses side by side, covariances as packed lower triangles).
+The basis rows psi(alpha_m t) are computed once per alpha and shared by every
 component. The controlled agent is recovered exactly only when asked for: since D depends
 on the observed weights alone, w_c | D follows from w_o | D through B_k = Sigma_co Sigma_oo^-1.
 """
@@ -12,7 +13,7 @@ on the observed weights alone, w_c | D follows from w_o | D through B_k = Sigma_
 import numpy as np
 from scipy import linalg
 
-from ._kalman import basis_rows, kalman_update, mean_trajectory
+from ._kalman import basis_rows, compact_columns, kalman_update, mean_trajectory, tri_index
 from .interaction import trajectory_distribution
 from .phase import alpha_grid, alpha_log_prior
 
@@ -24,10 +25,20 @@ class OnlineEstimator:
     skipped. Consecutive motion-capture samples are strongly correlated (the residual between
     a person's path and the model is smooth), so feeding 100+ Hz as independent evidence
     makes the posterior overconfident; 20 Hz is about the bandwidth of the residual.
+
+    ``prune_below``: after each observation, hypotheses whose posterior probability is below
+    this are dropped and no longer updated (0, the default: none is, the posterior is exact).
+    The ones kept are exact: their log evidence and weights are those of eqs. 17-18 given every
+    observation absorbed; the posterior is renormalised over them. ``pruned_mass`` sums the
+    probabilities of the dropped ones when they were dropped (each below ``prune_below``; a
+    dropped hypothesis is not revived, so this bounds the mass dropped at each pruning, not
+    what later evidence could have given it). Samples absorbed out of order (``absorb``) can
+    change which hypotheses are dropped, never the exactness of the kept ones. It must be
+    below 1 / (K M), so that the most probable hypothesis is always kept.
     """
 
     def __init__(self, model, n_alpha: int = 50, min_interval: float = 0.05,
-                 alpha_range_std: float = 3.0):
+                 alpha_range_std: float = 3.0, prune_below: float = 0.0):
         model._check_fitted()
         self.model = model
         self.min_interval = float(min_interval)
@@ -39,9 +50,16 @@ class OnlineEstimator:
         self._log_prior = (np.log(model.weights_)[:, None]
                            + alpha_log_prior(self.alphas, model.alpha_mean_, model.alpha_std_)
                            ).ravel()
-        self._mu0 = np.repeat(model.means_[:, :do], M, axis=0)
-        self._sigma0 = np.repeat(model.covariances_[:, :do, :do], M, axis=0)
-        self._psi_index = np.tile(np.arange(M), K)
+        if not 0.0 <= prune_below < 1.0 / (K * M):
+            raise ValueError(f'prune_below must be in [0, 1/(K M) = {1.0 / (K * M):.3g}), '
+                             f'got {prune_below}')
+        self.prune_below = float(prune_below)
+        # Column h of the state is hypothesis (k, m) = divmod(h, M) until pruning reorders them.
+        self._tri = tri_index(do)
+        lower = np.tril_indices(do)
+        self._cov0 = np.ascontiguousarray(np.repeat(
+            model.covariances_[:, lower[0], lower[1]], M, axis=0).T)
+        self._mu0 = np.ascontiguousarray(np.repeat(model.means_[:, :do], M, axis=0).T)
         self._noise = np.ascontiguousarray(model.observed_noise_var_, dtype=float)
         # Regression of controlled on observed weights per component (exact conditioning).
         self._gain, self._cond_cov = [], []
@@ -54,9 +72,14 @@ class OnlineEstimator:
 
     def reset(self):
         """Forget every observation: a new interaction starts (t = 0 at its onset)."""
-        self.mu = self._mu0.copy()
-        self.sigma = self._sigma0.copy()
-        self.log_evidence_flat = np.zeros(len(self._mu0))
+        self._cov = self._cov0.copy()
+        self._mu = self._mu0.copy()
+        self._loglik = np.zeros(self._cov.shape[1])
+        self._hyp = np.arange(self._cov.shape[1])     # hypothesis held in each column
+        self._col = self._hyp.copy()                  # column of each hypothesis, -1: pruned
+        self._psi_index = self._hyp % len(self.alphas)   # basis row (alpha) of each column
+        self.n_tracked = len(self._hyp)               # columns still updated
+        self.pruned_mass = 0.0
         self.n_observations = 0
         self.t_last = None
         self._joint = None      # p(k, alpha_m | D), computed once per update
@@ -105,9 +128,35 @@ class OnlineEstimator:
     def _absorb(self, t, y):
         self._joint = None
         psi = basis_rows(self.alphas * t, self.model.basis_.centers, self.model.basis_.width)
-        kalman_update(self.sigma, self.mu, self.log_evidence_flat, psi, self._psi_index, y,
-                      self._noise)
+        n = self.n_tracked
+        kalman_update(self._cov, self._mu, self._loglik, psi, self._psi_index, y, self._noise,
+                      n)
         self.n_observations += 1
+        if self.prune_below > 0.0:
+            p = self._tracked_posterior()
+            keep = p >= self.prune_below
+            if not keep.all():
+                self._prune(keep, p)
+
+    def _tracked_posterior(self):
+        """p(k, alpha_m | D) of the tracked columns, renormalised over them (eq. 16)."""
+        n = self.n_tracked
+        lp = self._log_prior[self._hyp[:n]] + self._loglik[:n]
+        p = np.exp(lp - lp.max())
+        return p / p.sum()
+
+    def _prune(self, keep, p):
+        """Drop the tracked columns not in ``keep``; the kept ones move to the front, in order."""
+        self.pruned_mass += float(p[~keep].sum())
+        src = np.flatnonzero(keep)
+        n = len(src)
+        compact_columns(self._cov, src)
+        compact_columns(self._mu, src)
+        for a in (self._loglik, self._hyp, self._psi_index):
+            a[:n] = a[src]
+        self._col[:] = -1
+        self._col[self._hyp[:n]] = np.arange(n)
+        self.n_tracked = n
 
     def _checked(self, y) -> np.ndarray:
         y = np.asarray(y, dtype=float)
@@ -119,18 +168,43 @@ class OnlineEstimator:
 
     # ------------------------------------------------------------------ queries
     @property
+    def log_evidence_flat(self):
+        """log p(D | k, alpha_m) of every hypothesis, flat (K M,); -inf where pruned."""
+        out = np.full(len(self._col), -np.inf)
+        n = self.n_tracked
+        out[self._hyp[:n]] = self._loglik[:n]
+        return out
+
+    @property
     def log_evidence(self):
-        """log p(D | k, alpha_m), shape (K, M) (a read-only view)."""
+        """log p(D | k, alpha_m), shape (K, M) (read-only); -inf where pruned."""
         view = self.log_evidence_flat.reshape(self.n_components, -1)
         view.flags.writeable = False
         return view
 
+    @property
+    def mu(self):
+        """Posterior means of the observed weights, (K M, d); NaN where pruned (a copy)."""
+        out = np.full((len(self._col), self._mu.shape[0]), np.nan)
+        n = self.n_tracked
+        out[self._hyp[:n]] = self._mu[:, :n].T
+        return out
+
+    @property
+    def sigma(self):
+        """Posterior covariances of the observed weights, (K M, d, d); NaN where pruned (a copy)."""
+        d = self._mu.shape[0]
+        out = np.full((len(self._col), d, d), np.nan)
+        n = self.n_tracked
+        out[self._hyp[:n]] = self._cov[:, :n][self._tri].transpose(2, 0, 1)
+        return out
+
     def joint_posterior(self):
-        """p(k, alpha_m | D), shape (K, M) (read-only)."""
+        """p(k, alpha_m | D), shape (K, M) (read-only); 0 where pruned."""
         if self._joint is None:
-            lp = self._log_prior + self.log_evidence_flat
-            p = np.exp(lp - lp.max())
-            self._joint = (p / p.sum()).reshape(self.n_components, -1)
+            joint = np.zeros(len(self._col))
+            joint[self._hyp[:self.n_tracked]] = self._tracked_posterior()
+            self._joint = joint.reshape(self.n_components, -1)
             self._joint.flags.writeable = False
         return self._joint
 
@@ -174,9 +248,13 @@ class OnlineEstimator:
         return float(np.clip(self.map_hypothesis()[1] * t, 0.0, 1.0))
 
     def observed_weights(self, k, m):
-        """Posterior N(mean, cov) of the observed agent's weights under hypothesis (k, m)."""
-        h = k * len(self.alphas) + m
-        return self.mu[h], self.sigma[h]
+        """Posterior N(mean, cov) of the observed agent's weights under hypothesis (k, m).
+        Raises ValueError if that hypothesis was pruned."""
+        c = self._col[k * len(self.alphas) + m]
+        if c < 0:
+            raise ValueError(f'hypothesis (component {k}, alpha {self.alphas[m]:.4g}) was '
+                             f'pruned (posterior below prune_below={self.prune_below:g})')
+        return self._mu[:, c].copy(), self._cov[:, c][self._tri]
 
     def predict(self, z_grid, component=None, alpha=None, covariance: bool = True):
         """Conditioned trajectories under (k*, alpha*) (or the given ones) at phases ``z_grid``.
