@@ -6,35 +6,44 @@ y = (I_P kron psi_h^T) w + e, e ~ N(0, diag(noise)). The update factors S = L L^
 applies G = L^-1 H Sigma, Sigma -= G^T G, which keeps Sigma positive definite over thousands
 of updates (the textbook K H Sigma form drifts). Cost O(P d^2) per hypothesis.
 
-Layout: the hypotheses are the fastest-varying index of every state array, so each inner loop
-runs over hypotheses with unit stride (SIMD over hypotheses; a row of d = 45 entries left a
-scalar remainder in every loop and ten times fewer iterations per loop entry), and Sigma is
-stored as its lower triangle only (symmetric by construction, half the update and memory):
-entry (i, j), j <= i, of hypothesis h is cov[i (i + 1) / 2 + j, h]. The first n columns are
-the hypotheses still tracked (see OnlineEstimator's pruning).
+Layout: hypotheses (columns) in groups of W = 8 lanes, each group contiguous, so one SIMD
+register holds one entry of eight hypotheses and a group's state (d (d + 1) / 2 W doubles)
+is streamed once per pass. Sigma is stored as its lower triangle only (symmetric by
+construction, half the update): entry (i, j), j <= i, of column c = g W + l is
+cov[g, (i (i + 1) / 2 + j) W + l]; mu[g, i W + l] is entry i of its mean. The columns of the
+groups past the tracked ones, and the lanes past them in the last group, hold valid states
+that are updated with the others and never read (see OnlineEstimator's pruning).
 """
 
 import numba
 import numpy as np
 
+from ._simd import W, vload, vsplat, vsqrt, vstore
+
 _LOG_2PI = float(np.log(2.0 * np.pi))
+
+
+@numba.njit(cache=True, fastmath=False, boundscheck=False)
+def _basis_row(z, centers, width, out):
+    """psi(z) of GaussianBasis (clamped to [0, 1]) into ``out`` (N,)."""
+    N = centers.shape[0]
+    inv = 0.5 / (width * width)
+    zc = min(max(z, 0.0), 1.0)
+    s = 0.0
+    for n in range(N):
+        e = zc - centers[n]
+        out[n] = np.exp(-e * e * inv)
+        s += out[n]
+    for n in range(N):
+        out[n] /= s
 
 
 @numba.njit(cache=True, fastmath=False, boundscheck=False)
 def basis_rows(z, centers, width):
     """psi(z) of GaussianBasis (clamped to [0, 1]) for each phase in z: (M, N)."""
-    M, N = z.shape[0], centers.shape[0]
-    out = np.empty((M, N))
-    inv = 0.5 / (width * width)
-    for m in range(M):
-        zc = min(max(z[m], 0.0), 1.0)
-        s = 0.0
-        for n in range(N):
-            e = zc - centers[n]
-            out[m, n] = np.exp(-e * e * inv)
-            s += out[m, n]
-        for n in range(N):
-            out[m, n] /= s
+    out = np.empty((z.shape[0], centers.shape[0]))
+    for m in range(z.shape[0]):
+        _basis_row(z[m], centers, width, out[m])
     return out
 
 
@@ -50,141 +59,166 @@ def _tri(i, j):
     return i * (i + 1) // 2 + j if j <= i else j * (j + 1) // 2 + i
 
 
-# 'contract' only: multiply-adds fused, no reassociation (results do not depend on the order
-# of the hypotheses or on how many are tracked).
+# 'contract' only: multiply-adds fused, no reassociation; every lane computed alike.
 @numba.njit(cache=True, fastmath={'contract'}, boundscheck=False)
-def kalman_update(cov, mu, loglik, psi, psi_index, y, noise, n):
-    """In place, for the first ``n`` columns: Sigma and mu conditioned on ``y`` (eq. 4 in
-    Kalman form) and loglik += log N(y; H mu, H Sigma H^T + R) (the factor of eq. 18).
+def kalman_update(cov, mu, loglik, n, alpha_index, alphas, t, centers, width, y, noise,
+                  log_prior, hypothesis, joint):
+    """One observation ``y`` at ``t`` s, in place for the first ``n`` columns (the tracked
+    hypotheses): Sigma and mu conditioned on y (eq. 4 in Kalman form), loglik += log N(y; H mu,
+    H Sigma H^T + R) (the factor of eq. 18), and the posterior (eq. 16) into ``joint``.
 
-    cov (d (d + 1) / 2, H) packed lower triangles, mu (d, H), loglik (H,); ``psi`` (M, N) basis
-    rows per phase hypothesis, ``psi_index`` (H,) which row each column uses; noise (P,) = diag R.
+    cov (groups, d (d + 1) / 2 W), mu (groups, d W) (see the module's layout); per column c:
+    loglik[c], phase speed alphas[alpha_index[c]] (H = I_P kron psi(alpha t)^T, eq. 15 with
+    ``centers``, ``width``), log_prior[c], and which hypothesis it is, hypothesis[c]; noise (P,)
+    = diag R. joint (K M,): p(k, alpha_m | D) renormalised over the tracked hypotheses, 0 for
+    the others.
     """
-    d = mu.shape[0]
+    d = mu.shape[1] // W
     P = y.shape[0]
-    N = psi.shape[1]
-    phi = np.empty((N, n))
-    for h in range(n):
-        row = psi[psi_index[h]]
-        for k in range(N):
-            phi[k, h] = row[k]
-    n_rows = -(-P // 3) * 3         # G in groups of three rows (the extra rows stay zero)
-    G = np.zeros((n_rows, d, n))
-    L = np.empty((P, P, n))
-    r = np.empty((P, n))
-    # H Sigma: row p is sum_k psi_k Sigma[pN + k, :], three basis rows per pass.
-    for p in range(P):
-        for j in range(d):
-            out = G[p, j]
-            k = 0
-            while k < N:
-                i0 = p * N + k
-                if k + 3 <= N:
-                    s0, s1, s2 = cov[_tri(i0, j)], cov[_tri(i0 + 1, j)], cov[_tri(i0 + 2, j)]
-                    f0, f1, f2 = phi[k], phi[k + 1], phi[k + 2]
-                    for h in range(n):
-                        out[h] += f0[h] * s0[h] + f1[h] * s1[h] + f2[h] * s2[h]
-                    k += 3
-                else:
-                    s0, f0 = cov[_tri(i0, j)], phi[k]
-                    for h in range(n):
-                        out[h] += f0[h] * s0[h]
-                    k += 1
-    # S = H Sigma H^T + R (lower half) and the residual y - H mu.
-    for p in range(P):
-        for q in range(p + 1):
-            out = L[p, q]
-            for h in range(n):
-                out[h] = 0.0
+    N = centers.shape[0]
+    psi = np.empty((alphas.shape[0], N))       # basis rows once per phase speed in use
+    done = np.zeros(alphas.shape[0], dtype=np.bool_)
+    phi = np.empty(N * W)
+    n_rows = -(-P // 3) * 3                    # G in groups of three rows (extra rows zero)
+    G = np.zeros(n_rows * d * W)
+    L = np.empty(P * P * W)
+    r = np.empty(P * W)
+    for g in range(-(-n // W)):
+        S = cov[g]
+        m_g = mu[g]
+        for lane in range(W):
+            a = alpha_index[g * W + lane]
+            if not done[a]:
+                _basis_row(alphas[a] * t, centers, width, psi[a])
+                done[a] = True
             for k in range(N):
-                a, f = G[p, q * N + k], phi[k]
-                for h in range(n):
-                    out[h] += a[h] * f[h]
-        out = L[p, p]
-        for h in range(n):
-            out[h] += noise[p]
-        out = r[p]
-        for h in range(n):
-            out[h] = y[p]
-        for k in range(N):
-            m, f = mu[p * N + k], phi[k]
-            for h in range(n):
-                out[h] -= f[h] * m[h]
-    # S = L L^T in place.
-    for i in range(P):
-        for j in range(i + 1):
-            out = L[i, j]
-            for q in range(j):
-                a, b = L[i, q], L[j, q]
-                for h in range(n):
-                    out[h] -= a[h] * b[h]
-            if i == j:
-                for h in range(n):
-                    out[h] = np.sqrt(out[h])
-            else:
-                b = L[j, j]
-                for h in range(n):
-                    out[h] /= b[h]
-    # G = L^-1 H Sigma in place, whitened residual r = L^-1 (y - H mu), log det S.
-    inv = np.empty(n)
-    logdet = np.zeros(n)
-    prod = np.ones(n)
-    for p in range(P):
-        b = L[p, p]
-        for h in range(n):
-            inv[h] = 1.0 / b[h]
-            prod[h] *= b[h]
-        if p % 8 == 7 or p == P - 1:    # L_pp^2 >= min(noise): 8 factors cannot underflow
-            for h in range(n):
-                logdet[h] += 2.0 * np.log(prod[h])
-                prod[h] = 1.0
-        for q in range(p):
-            a = L[p, q]
-            for j in range(d):
-                out, g = G[p, j], G[q, j]
-                for h in range(n):
-                    out[h] -= a[h] * g[h]
-            out, g = r[p], r[q]
-            for h in range(n):
-                out[h] -= a[h] * g[h]
-        for j in range(d):
-            out = G[p, j]
-            for h in range(n):
-                out[h] *= inv[h]
-        out = r[p]
-        for h in range(n):
-            out[h] *= inv[h]
-    c = P * _LOG_2PI
-    for h in range(n):
-        quad = 0.0
+                phi[k * W + lane] = psi[a, k]
+        # H Sigma: G[p, j] = sum_k psi_k Sigma[pN + k, j], four columns j per pass.
         for p in range(P):
-            quad += r[p, h] * r[p, h]
-        loglik[h] += -0.5 * (c + logdet[h] + quad)
-    # mu += G^T r
-    for i in range(d):
-        out = mu[i]
+            j = 0
+            while j < d:
+                if j + 4 <= d:
+                    a0 = a1 = a2 = a3 = vsplat(0.0)
+                    for k in range(N):
+                        i = p * N + k
+                        f = vload(phi, k * W)
+                        a0 = a0 + f * vload(S, _tri(i, j) * W)
+                        a1 = a1 + f * vload(S, _tri(i, j + 1) * W)
+                        a2 = a2 + f * vload(S, _tri(i, j + 2) * W)
+                        a3 = a3 + f * vload(S, _tri(i, j + 3) * W)
+                    o = (p * d + j) * W
+                    vstore(G, o, a0)
+                    vstore(G, o + W, a1)
+                    vstore(G, o + 2 * W, a2)
+                    vstore(G, o + 3 * W, a3)
+                    j += 4
+                else:
+                    a0 = vsplat(0.0)
+                    for k in range(N):
+                        a0 = a0 + vload(phi, k * W) * vload(S, _tri(p * N + k, j) * W)
+                    vstore(G, (p * d + j) * W, a0)
+                    j += 1
+        # S = H Sigma H^T + R (lower half) and the residual y - H mu.
         for p in range(P):
-            a, b = G[p, i], r[p]
-            for h in range(n):
-                out[h] += a[h] * b[h]
-    # Sigma -= G^T G on the lower triangle, three rows of G per pass.
-    for c3 in range(0, n_rows, 3):
-        for i in range(d):
-            a0, a1, a2 = G[c3, i], G[c3 + 1, i], G[c3 + 2, i]
-            base = i * (i + 1) // 2
+            for q in range(p + 1):
+                a0 = vsplat(noise[p]) if q == p else vsplat(0.0)
+                for k in range(N):
+                    a0 = a0 + vload(G, (p * d + q * N + k) * W) * vload(phi, k * W)
+                vstore(L, (p * P + q) * W, a0)
+            a0 = vsplat(y[p])
+            for k in range(N):
+                a0 = a0 - vload(phi, k * W) * vload(m_g, (p * N + k) * W)
+            vstore(r, p * W, a0)
+        # S = L L^T in place.
+        for i in range(P):
             for j in range(i + 1):
-                out = cov[base + j]
-                b0, b1, b2 = G[c3, j], G[c3 + 1, j], G[c3 + 2, j]
-                for h in range(n):
-                    out[h] -= a0[h] * b0[h] + a1[h] * b1[h] + a2[h] * b2[h]
+                a0 = vload(L, (i * P + j) * W)
+                for q in range(j):
+                    a0 = a0 - vload(L, (i * P + q) * W) * vload(L, (j * P + q) * W)
+                if i == j:
+                    a0 = vsqrt(a0)
+                else:
+                    a0 = a0 / vload(L, (j * P + j) * W)
+                vstore(L, (i * P + j) * W, a0)
+        # G = L^-1 H Sigma and r = L^-1 (y - H mu) in place.
+        for p in range(P):
+            inv = vsplat(1.0) / vload(L, (p * P + p) * W)
+            for j in range(d):
+                a0 = vload(G, (p * d + j) * W)
+                for q in range(p):
+                    a0 = a0 - vload(L, (p * P + q) * W) * vload(G, (q * d + j) * W)
+                vstore(G, (p * d + j) * W, a0 * inv)
+            a0 = vload(r, p * W)
+            for q in range(p):
+                a0 = a0 - vload(L, (p * P + q) * W) * vload(r, q * W)
+            vstore(r, p * W, a0 * inv)
+        # log N(y; H mu, S) = -(P log 2 pi + log det S + |r|^2) / 2, det S = prod L_pp^2.
+        for lane in range(W):
+            logdet, quad, prod = 0.0, 0.0, 1.0
+            for p in range(P):
+                prod *= L[(p * P + p) * W + lane]
+                if p % 8 == 7 or p == P - 1:   # L_pp^2 >= min(noise): 8 factors cannot underflow
+                    logdet += 2.0 * np.log(prod)
+                    prod = 1.0
+                quad += r[p * W + lane] ** 2
+            loglik[g * W + lane] += -0.5 * (P * _LOG_2PI + logdet + quad)
+        # mu += G^T r
+        for i in range(d):
+            a0 = vload(m_g, i * W)
+            for p in range(P):
+                a0 = a0 + vload(G, (p * d + i) * W) * vload(r, p * W)
+            vstore(m_g, i * W, a0)
+        # Sigma -= G^T G on the lower triangle: three rows of G, rows i and i + 1 of Sigma per
+        # pass (they share the loads of G[:, j]).
+        for c in range(0, n_rows, 3):
+            g0, g1, g2 = c * d * W, (c + 1) * d * W, (c + 2) * d * W
+            i = 0
+            while i < d:
+                a0, a1, a2 = vload(G, g0 + i * W), vload(G, g1 + i * W), vload(G, g2 + i * W)
+                base = i * (i + 1) // 2
+                if i + 1 < d:
+                    e0 = vload(G, g0 + (i + 1) * W)
+                    e1 = vload(G, g1 + (i + 1) * W)
+                    e2 = vload(G, g2 + (i + 1) * W)
+                    for j in range(i + 1):
+                        b0, b1, b2 = vload(G, g0 + j * W), vload(G, g1 + j * W), vload(G, g2 + j * W)
+                        o = (base + j) * W
+                        vstore(S, o, vload(S, o) - (a0 * b0 + a1 * b1 + a2 * b2))
+                        o += (i + 1) * W                     # entry (i + 1, j)
+                        vstore(S, o, vload(S, o) - (e0 * b0 + e1 * b1 + e2 * b2))
+                    o = (base + 2 * i + 2) * W              # entry (i + 1, i + 1)
+                    vstore(S, o, vload(S, o) - (e0 * e0 + e1 * e1 + e2 * e2))
+                    i += 2
+                else:
+                    for j in range(i + 1):
+                        b0, b1, b2 = vload(G, g0 + j * W), vload(G, g1 + j * W), vload(G, g2 + j * W)
+                        o = (base + j) * W
+                        vstore(S, o, vload(S, o) - (a0 * b0 + a1 * b1 + a2 * b2))
+                    i += 1
+    # Posterior over the tracked hypotheses (eq. 16 with the mixture weight in the prior).
+    top = -np.inf
+    for c in range(n):
+        top = max(top, log_prior[c] + loglik[c])
+    joint[:] = 0.0
+    total = 0.0
+    for c in range(n):
+        e = np.exp(log_prior[c] + loglik[c] - top)
+        joint[hypothesis[c]] = e
+        total += e
+    for c in range(n):
+        joint[hypothesis[c]] /= total
 
 
 @numba.njit(cache=True, boundscheck=False)
-def compact_columns(a, src):
-    """In place: column k of the 2-D ``a`` becomes column src[k] (src increasing)."""
-    for row in a:
-        for k in range(src.shape[0]):
-            row[k] = row[src[k]]
+def compact_lanes(a, src):
+    """In place: column k of the lane-grouped ``a`` (groups, m W) becomes column src[k]
+    (src increasing, so no column is overwritten before it is moved)."""
+    m = a.shape[1] // W
+    for k in range(src.shape[0]):
+        s = src[k]
+        if s != k:
+            for e in range(m):
+                a[k // W, e * W + k % W] = a[s // W, e * W + s % W]
 
 
 @numba.njit(cache=True, fastmath=False, boundscheck=False)

@@ -13,7 +13,8 @@ on the observed weights alone, w_c | D follows from w_o | D through B_k = Sigma_
 import numpy as np
 from scipy import linalg
 
-from ._kalman import basis_rows, compact_columns, kalman_update, mean_trajectory, tri_index
+from ._kalman import basis_rows, compact_lanes, kalman_update, mean_trajectory, tri_index
+from ._simd import W
 from .interaction import trajectory_distribution
 from .phase import alpha_grid, alpha_log_prior
 
@@ -54,12 +55,14 @@ class OnlineEstimator:
             raise ValueError(f'prune_below must be in [0, 1/(K M) = {1.0 / (K * M):.3g}), '
                              f'got {prune_below}')
         self.prune_below = float(prune_below)
-        # Column h of the state is hypothesis (k, m) = divmod(h, M) until pruning reorders them.
+        # Column c of the state is hypothesis (k, m) = divmod(c, M) until pruning reorders them;
+        # the columns are padded to whole lane groups with copies of column 0 (never read).
         self._tri = tri_index(do)
         lower = np.tril_indices(do)
-        self._cov0 = np.ascontiguousarray(np.repeat(
-            model.covariances_[:, lower[0], lower[1]], M, axis=0).T)
-        self._mu0 = np.ascontiguousarray(np.repeat(model.means_[:, :do], M, axis=0).T)
+        pad = np.r_[np.arange(K * M), np.zeros(-(K * M) % W, dtype=int)]
+        self._cov0 = _to_lanes(np.repeat(model.covariances_[:, lower[0], lower[1]], M, 0)[pad])
+        self._mu0 = _to_lanes(np.repeat(model.means_[:, :do], M, 0)[pad])
+        self._prior0 = self._log_prior[pad]
         self._noise = np.ascontiguousarray(model.observed_noise_var_, dtype=float)
         # Regression of controlled on observed weights per component (exact conditioning).
         self._gain, self._cond_cov = [], []
@@ -74,15 +77,17 @@ class OnlineEstimator:
         """Forget every observation: a new interaction starts (t = 0 at its onset)."""
         self._cov = self._cov0.copy()
         self._mu = self._mu0.copy()
-        self._loglik = np.zeros(self._cov.shape[1])
-        self._hyp = np.arange(self._cov.shape[1])     # hypothesis held in each column
-        self._col = self._hyp.copy()                  # column of each hypothesis, -1: pruned
-        self._psi_index = self._hyp % len(self.alphas)   # basis row (alpha) of each column
-        self.n_tracked = len(self._hyp)               # columns still updated
+        n_columns = len(self._prior0)
+        self._loglik = np.zeros(n_columns)
+        self._hyp = np.arange(n_columns)                    # hypothesis held in each column
+        self._col = np.arange(len(self._log_prior))         # column of each one, -1: pruned
+        self._alpha_index = self._hyp % len(self.alphas)    # phase speed of each column
+        self._prior = self._prior0.copy()                   # log prior of each column
+        self.n_tracked = len(self._col)                     # columns still updated
         self.pruned_mass = 0.0
         self.n_observations = 0
         self.t_last = None
-        self._joint = None      # p(k, alpha_m | D), computed once per update
+        self._joint = None      # p(k, alpha_m | D), computed with each update
 
     def update(self, t: float, y) -> bool:
         """Add the observed agent's position ``y`` (P,) at ``t`` seconds after onset.
@@ -126,33 +131,33 @@ class OnlineEstimator:
         self._absorb(t, y)
 
     def _absorb(self, t, y):
-        self._joint = None
-        psi = basis_rows(self.alphas * t, self.model.basis_.centers, self.model.basis_.width)
-        n = self.n_tracked
-        kalman_update(self._cov, self._mu, self._loglik, psi, self._psi_index, y, self._noise,
-                      n)
+        joint = np.empty(len(self._col))
+        basis = self.model.basis_
+        kalman_update(self._cov, self._mu, self._loglik, self.n_tracked, self._alpha_index,
+                      self.alphas, float(t), basis.centers, basis.width, y, self._noise,
+                      self._prior, self._hyp, joint)
         self.n_observations += 1
         if self.prune_below > 0.0:
-            p = self._tracked_posterior()
-            keep = p >= self.prune_below
-            if not keep.all():
-                self._prune(keep, p)
+            self._prune(joint)
+        self._joint = joint.reshape(self.n_components, -1)
+        self._joint.flags.writeable = False
 
-    def _tracked_posterior(self):
-        """p(k, alpha_m | D) of the tracked columns, renormalised over them (eq. 16)."""
-        n = self.n_tracked
-        lp = self._log_prior[self._hyp[:n]] + self._loglik[:n]
-        p = np.exp(lp - lp.max())
-        return p / p.sum()
-
-    def _prune(self, keep, p):
-        """Drop the tracked columns not in ``keep``; the kept ones move to the front, in order."""
-        self.pruned_mass += float(p[~keep].sum())
+    def _prune(self, joint):
+        """Drop the tracked hypotheses whose posterior ``joint`` is below prune_below (joint is
+        renormalised over the others); the kept columns move to the front, in order."""
+        hyp = self._hyp[:self.n_tracked]
+        keep = joint[hyp] >= self.prune_below
+        if keep.all():
+            return
+        dropped = hyp[~keep]
+        self.pruned_mass += float(joint[dropped].sum())
+        joint[dropped] = 0.0
+        joint /= joint.sum()
+        n = int(keep.sum())
         src = np.flatnonzero(keep)
-        n = len(src)
-        compact_columns(self._cov, src)
-        compact_columns(self._mu, src)
-        for a in (self._loglik, self._hyp, self._psi_index):
+        compact_lanes(self._cov, src)
+        compact_lanes(self._mu, src)
+        for a in (self._loglik, self._hyp, self._alpha_index, self._prior):
             a[:n] = a[src]
         self._col[:] = -1
         self._col[self._hyp[:n]] = np.arange(n)
@@ -185,26 +190,26 @@ class OnlineEstimator:
     @property
     def mu(self):
         """Posterior means of the observed weights, (K M, d); NaN where pruned (a copy)."""
-        out = np.full((len(self._col), self._mu.shape[0]), np.nan)
+        d = self.n_observed * self.n_basis
+        out = np.full((len(self._col), d), np.nan)
         n = self.n_tracked
-        out[self._hyp[:n]] = self._mu[:, :n].T
+        out[self._hyp[:n]] = _from_lanes(self._mu)[:n]
         return out
 
     @property
     def sigma(self):
         """Posterior covariances of the observed weights, (K M, d, d); NaN where pruned (a copy)."""
-        d = self._mu.shape[0]
+        d = self.n_observed * self.n_basis
         out = np.full((len(self._col), d, d), np.nan)
         n = self.n_tracked
-        out[self._hyp[:n]] = self._cov[:, :n][self._tri].transpose(2, 0, 1)
+        out[self._hyp[:n]] = _from_lanes(self._cov)[:n][:, self._tri]
         return out
 
     def joint_posterior(self):
         """p(k, alpha_m | D), shape (K, M) (read-only); 0 where pruned."""
-        if self._joint is None:
-            joint = np.zeros(len(self._col))
-            joint[self._hyp[:self.n_tracked]] = self._tracked_posterior()
-            self._joint = joint.reshape(self.n_components, -1)
+        if self._joint is None:           # no observation yet: the prior
+            p = np.exp(self._log_prior - self._log_prior.max())
+            self._joint = (p / p.sum()).reshape(self.n_components, -1)
             self._joint.flags.writeable = False
         return self._joint
 
@@ -254,7 +259,9 @@ class OnlineEstimator:
         if c < 0:
             raise ValueError(f'hypothesis (component {k}, alpha {self.alphas[m]:.4g}) was '
                              f'pruned (posterior below prune_below={self.prune_below:g})')
-        return self._mu[:, c].copy(), self._cov[:, c][self._tri]
+        g, lane = divmod(c, W)
+        return (self._mu[g].reshape(-1, W)[:, lane].copy(),
+                self._cov[g].reshape(-1, W)[:, lane][self._tri])
 
     def predict(self, z_grid, component=None, alpha=None, covariance: bool = True):
         """Conditioned trajectories under (k*, alpha*) (or the given ones) at phases ``z_grid``.
@@ -309,3 +316,16 @@ class OnlineEstimator:
         dofs = range(self.n_observed, self.n_observed + self.model.n_controlled_)
         out = trajectory_distribution(mean, cov, self.model.basis_, [1.0], 1.0, dofs)
         return out['position'][0], out['position_cov'][0]
+
+
+def _to_lanes(columns):
+    """Per-column rows (C, m), C a multiple of W, to the kernel's lane groups (C / W, m W)."""
+    C, m = columns.shape
+    return np.ascontiguousarray(columns.reshape(C // W, W, m).transpose(0, 2, 1)).reshape(
+        C // W, m * W)
+
+
+def _from_lanes(groups):
+    """Inverse of _to_lanes (a copy)."""
+    G, mW = groups.shape
+    return groups.reshape(G, mW // W, W).transpose(0, 2, 1).reshape(G * W, mW // W)
