@@ -4,8 +4,8 @@ alpha, updated recursively per observation, and the conditioned controlled-agent
 
 Each hypothesis (k, alpha_m) keeps the Gaussian over the observed agent's weights given D and
 its log evidence log p(D | k, alpha_m) (eqs. 17-18), updated in Kalman form in O(P d^2) per
-observation (core/_kalman: hypotheses side by side, covariances as packed lower triangles).
-The basis rows psi(alpha_m t) are computed once per alpha and shared by every
+observation (core/_kalman: hypotheses in groups of SIMD lanes, covariances as packed lower
+triangles). The basis rows psi(alpha_m t) are computed once per alpha and shared by every
 component. The controlled agent is recovered exactly only when asked for: since D depends
 on the observed weights alone, w_c | D follows from w_o | D through B_k = Sigma_co Sigma_oo^-1.
 """
@@ -59,10 +59,10 @@ class OnlineEstimator:
         # the columns are padded to whole lane groups with copies of column 0 (never read).
         self._tri = tri_index(do)
         lower = np.tril_indices(do)
-        pad = np.r_[np.arange(K * M), np.zeros(-(K * M) % W, dtype=int)]
-        self._cov0 = _to_lanes(np.repeat(model.covariances_[:, lower[0], lower[1]], M, 0)[pad])
-        self._mu0 = _to_lanes(np.repeat(model.means_[:, :do], M, 0)[pad])
-        self._prior0 = self._log_prior[pad]
+        self._hyp0 = np.r_[np.arange(K * M), np.zeros(-(K * M) % W, dtype=int)]
+        self._cov0 = _to_lanes(np.repeat(model.covariances_[:, lower[0], lower[1]], M, 0)
+                               [self._hyp0])
+        self._mu0 = _to_lanes(np.repeat(model.means_[:, :do], M, 0)[self._hyp0])
         self._noise = np.ascontiguousarray(model.observed_noise_var_, dtype=float)
         # Regression of controlled on observed weights per component (exact conditioning).
         self._gain, self._cond_cov = [], []
@@ -77,12 +77,11 @@ class OnlineEstimator:
         """Forget every observation: a new interaction starts (t = 0 at its onset)."""
         self._cov = self._cov0.copy()
         self._mu = self._mu0.copy()
-        n_columns = len(self._prior0)
-        self._loglik = np.zeros(n_columns)
-        self._hyp = np.arange(n_columns)                    # hypothesis held in each column
-        self._col = np.arange(len(self._log_prior))         # column of each one, -1: pruned
+        self._hyp = self._hyp0.copy()                       # hypothesis held in each column
+        self._loglik = np.zeros(len(self._hyp))
         self._alpha_index = self._hyp % len(self.alphas)    # phase speed of each column
-        self._prior = self._prior0.copy()                   # log prior of each column
+        self._prior = self._log_prior[self._hyp]            # log prior of each column
+        self._col = np.arange(len(self._log_prior))         # column of each one, -1: pruned
         self.n_tracked = len(self._col)                     # columns still updated
         self.pruned_mass = 0.0
         self.n_observations = 0
