@@ -4,7 +4,7 @@ import numba
 import numpy as np
 
 from mixture_ip_ros.core._kalman import compact_lanes, tri_index
-from mixture_ip_ros.core._simd import W, vload, vsplat, vsqrt, vstore
+from mixture_ip_ros.core._kalman import W, vload, vsplat, vsqrt, vstore
 from mixture_ip_ros.core.online import _from_lanes, _to_lanes
 
 

@@ -13,8 +13,7 @@ on the observed weights alone, w_c | D follows from w_o | D through B_k = Sigma_
 import numpy as np
 from scipy import linalg
 
-from ._kalman import basis_rows, compact_lanes, kalman_update, mean_trajectory, tri_index
-from ._simd import W
+from ._kalman import W, basis_rows, compact_lanes, kalman_update, mean_trajectory, tri_index
 from .interaction import trajectory_distribution
 from .phase import alpha_grid, alpha_log_prior
 
