@@ -199,8 +199,8 @@ def kalman_update(cov, mu, loglik, n, alpha_index, alphas, t, centers, width, y,
     L = np.empty(P * P * W)
     r = np.empty(P * W)
     for g in range(-(-n // W)):
-        S = cov[g]
-        m_g = mu[g]
+        cov_g = cov[g]
+        mu_g = mu[g]
         for lane in range(W):
             a = alpha_index[g * W + lane]
             if not done[a]:
@@ -217,10 +217,10 @@ def kalman_update(cov, mu, loglik, n, alpha_index, alphas, t, centers, width, y,
                     for k in range(N):
                         i = p * N + k
                         f = vload(phi, k * W)
-                        a0 = a0 + f * vload(S, _tri(i, j) * W)
-                        a1 = a1 + f * vload(S, _tri(i, j + 1) * W)
-                        a2 = a2 + f * vload(S, _tri(i, j + 2) * W)
-                        a3 = a3 + f * vload(S, _tri(i, j + 3) * W)
+                        a0 = a0 + f * vload(cov_g, _tri(i, j) * W)
+                        a1 = a1 + f * vload(cov_g, _tri(i, j + 1) * W)
+                        a2 = a2 + f * vload(cov_g, _tri(i, j + 2) * W)
+                        a3 = a3 + f * vload(cov_g, _tri(i, j + 3) * W)
                     o = (p * d + j) * W
                     vstore(G, o, a0)
                     vstore(G, o + W, a1)
@@ -230,7 +230,7 @@ def kalman_update(cov, mu, loglik, n, alpha_index, alphas, t, centers, width, y,
                 else:
                     a0 = vsplat(0.0)
                     for k in range(N):
-                        a0 = a0 + vload(phi, k * W) * vload(S, _tri(p * N + k, j) * W)
+                        a0 = a0 + vload(phi, k * W) * vload(cov_g, _tri(p * N + k, j) * W)
                     vstore(G, (p * d + j) * W, a0)
                     j += 1
         # S = H Sigma H^T + R (lower half) and the residual y - H mu.
@@ -242,7 +242,7 @@ def kalman_update(cov, mu, loglik, n, alpha_index, alphas, t, centers, width, y,
                 vstore(L, (p * P + q) * W, a0)
             a0 = vsplat(y[p])
             for k in range(N):
-                a0 = a0 - vload(phi, k * W) * vload(m_g, (p * N + k) * W)
+                a0 = a0 - vload(phi, k * W) * vload(mu_g, (p * N + k) * W)
             vstore(r, p * W, a0)
         # S = L L^T in place.
         for i in range(P):
@@ -279,10 +279,10 @@ def kalman_update(cov, mu, loglik, n, alpha_index, alphas, t, centers, width, y,
             loglik[g * W + lane] += -0.5 * (P * _LOG_2PI + logdet + quad)
         # mu += G^T r
         for i in range(d):
-            a0 = vload(m_g, i * W)
+            a0 = vload(mu_g, i * W)
             for p in range(P):
                 a0 = a0 + vload(G, (p * d + i) * W) * vload(r, p * W)
-            vstore(m_g, i * W, a0)
+            vstore(mu_g, i * W, a0)
         # Sigma -= G^T G on the lower triangle: three rows of G, rows i and i + 1 of Sigma per
         # pass (they share the loads of G[:, j]).
         for c in range(0, n_rows, 3):
@@ -296,19 +296,23 @@ def kalman_update(cov, mu, loglik, n, alpha_index, alphas, t, centers, width, y,
                     e1 = vload(G, g1 + (i + 1) * W)
                     e2 = vload(G, g2 + (i + 1) * W)
                     for j in range(i + 1):
-                        b0, b1, b2 = vload(G, g0 + j * W), vload(G, g1 + j * W), vload(G, g2 + j * W)
+                        b0 = vload(G, g0 + j * W)
+                        b1 = vload(G, g1 + j * W)
+                        b2 = vload(G, g2 + j * W)
                         o = (base + j) * W
-                        vstore(S, o, vload(S, o) - (a0 * b0 + a1 * b1 + a2 * b2))
+                        vstore(cov_g, o, vload(cov_g, o) - (a0 * b0 + a1 * b1 + a2 * b2))
                         o += (i + 1) * W                     # entry (i + 1, j)
-                        vstore(S, o, vload(S, o) - (e0 * b0 + e1 * b1 + e2 * b2))
+                        vstore(cov_g, o, vload(cov_g, o) - (e0 * b0 + e1 * b1 + e2 * b2))
                     o = (base + 2 * i + 2) * W              # entry (i + 1, i + 1)
-                    vstore(S, o, vload(S, o) - (e0 * e0 + e1 * e1 + e2 * e2))
+                    vstore(cov_g, o, vload(cov_g, o) - (e0 * e0 + e1 * e1 + e2 * e2))
                     i += 2
                 else:
                     for j in range(i + 1):
-                        b0, b1, b2 = vload(G, g0 + j * W), vload(G, g1 + j * W), vload(G, g2 + j * W)
+                        b0 = vload(G, g0 + j * W)
+                        b1 = vload(G, g1 + j * W)
+                        b2 = vload(G, g2 + j * W)
                         o = (base + j) * W
-                        vstore(S, o, vload(S, o) - (a0 * b0 + a1 * b1 + a2 * b2))
+                        vstore(cov_g, o, vload(cov_g, o) - (a0 * b0 + a1 * b1 + a2 * b2))
                     i += 1
     # Posterior over the tracked hypotheses (eq. 16 with the mixture weight in the prior).
     top = -np.inf
@@ -337,11 +341,11 @@ def compact_lanes(a, src):
 
 
 @numba.njit(cache=True, fastmath=False, boundscheck=False)
-def mean_trajectory(W, z, centers, width, alpha):
-    """Mean positions, velocities, accelerations (len(z), n) of the DOFs with weights W (n, N)
+def mean_trajectory(weights, z, centers, width, alpha):
+    """Mean positions, velocities, accelerations (len(z), n) of the DOFs with ``weights`` (n, N)
     at phases z for the phase speed alpha: eqs. 1-3 with GaussianBasis.evaluate's basis and its
     clamping (psi held, derivatives zero outside [0, 1]), in one pass without temporaries."""
-    T, N, n = z.shape[0], centers.shape[0], W.shape[0]
+    T, N, n = z.shape[0], centers.shape[0], weights.shape[0]
     pos = np.zeros((T, n))
     vel = np.zeros((T, n))
     acc = np.zeros((T, n))
@@ -364,11 +368,11 @@ def mean_trajectory(W, z, centers, width, alpha):
         for i in range(N):
             psi = b[i] / s
             for j in range(n):
-                pos[t, j] += psi * W[j, i]
+                pos[t, j] += psi * weights[j, i]
             if inside:
                 dpsi = (db[i] - psi * ds) / s
                 ddpsi = (ddb[i] - 2.0 * dpsi * ds - psi * dds) / s
                 for j in range(n):
-                    vel[t, j] += alpha * dpsi * W[j, i]
-                    acc[t, j] += alpha * alpha * ddpsi * W[j, i]
+                    vel[t, j] += alpha * dpsi * weights[j, i]
+                    acc[t, j] += alpha * alpha * ddpsi * weights[j, i]
     return pos, vel, acc
