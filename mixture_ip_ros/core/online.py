@@ -253,13 +253,17 @@ class OnlineEstimator:
     def observed_weights(self, k, m):
         """Posterior N(mean, cov) of the observed agent's weights under hypothesis (k, m).
         Raises ValueError if that hypothesis was pruned."""
+        g, lane = self._lane(k, m)
+        return (self._mu[g].reshape(-1, W)[:, lane].copy(),
+                self._cov[g].reshape(-1, W)[:, lane][self._tri])
+
+    def _lane(self, k, m):
+        """(group, lane) of hypothesis (k, m) in the kernel's state."""
         c = self._col[k * len(self.alphas) + m]
         if c < 0:
             raise ValueError(f'hypothesis (component {k}, alpha {self.alphas[m]:.4g}) was '
                              f'pruned (posterior below prune_below={self.prune_below:g})')
-        g, lane = divmod(c, W)
-        return (self._mu[g].reshape(-1, W)[:, lane].copy(),
-                self._cov[g].reshape(-1, W)[:, lane][self._tri])
+        return divmod(c, W)
 
     def predict(self, z_grid, component=None, alpha=None, covariance: bool = True):
         """Conditioned trajectories under (k*, alpha*) (or the given ones) at phases ``z_grid``.
@@ -291,7 +295,8 @@ class OnlineEstimator:
         k, m = self._hypothesis(component, alpha)
         a = float(self.alphas[m])
         basis = self.model.basis_
-        mu_o = self.observed_weights(k, m)[0]
+        g, lane = self._lane(k, m)
+        mu_o = self._mu[g].reshape(-1, W)[:, lane]      # the mean only: no covariance built
         controlled = mean_trajectory(self._controlled_mean(k, mu_o).reshape(-1, self.n_basis),
                                      np.asarray(z_controlled, dtype=float), basis.centers,
                                      basis.width, a)
