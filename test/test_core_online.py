@@ -268,8 +268,8 @@ def test_pruning_keeps_the_kept_hypotheses_exact_and_tracks_the_dropped_mass(mod
     pruned.reset()
     assert pruned.n_tracked == 36 and pruned.pruned_mass == 0
     assert np.isfinite(pruned.log_evidence).all()
-    np.testing.assert_allclose(pruned.joint_posterior(), exact.__class__(
-        model, n_alpha=12).joint_posterior(), atol=1e-15)
+    np.testing.assert_allclose(pruned.joint_posterior(),
+                               OnlineEstimator(model, n_alpha=12).joint_posterior(), atol=1e-15)
 
 
 def test_pruning_with_samples_absorbed_in_any_order_keeps_the_kept_ones_exact(model_and_demos):

@@ -28,8 +28,8 @@ class OnlineEstimator:
 
     ``prune_below``: after each observation, hypotheses whose posterior probability is below
     this are dropped and no longer updated (0, the default: none is, the posterior is exact).
-    The ones kept are exact: their log evidence and weights are those of eqs. 17-18 given every
-    observation absorbed; the posterior is renormalised over them. ``pruned_mass`` sums the
+    The ones kept are exact: their log evidence and posterior weights are those of eqs. 17-18
+    given every observation absorbed; the posterior is renormalised over them. ``pruned_mass`` sums the
     probabilities of the dropped ones when they were dropped (each below ``prune_below``; a
     dropped hypothesis is not revived, so this bounds the mass dropped at each pruning, not
     what later evidence could have given it). Samples absorbed out of order (``absorb``) can
