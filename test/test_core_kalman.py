@@ -3,9 +3,8 @@
 import numba
 import numpy as np
 
-from mixture_ip_ros.core._kalman import compact_lanes, tri_index
-from mixture_ip_ros.core._kalman import W, vload, vsplat, vsqrt, vstore
-from mixture_ip_ros.core.online import _from_lanes, _to_lanes
+from mixture_ip_ros.core._kalman import (W, compact_lanes, from_lanes, to_lanes, tri_index, vload,
+                                         vsplat, vsqrt, vstore)
 
 
 @numba.njit(fastmath={'contract'})
@@ -27,10 +26,10 @@ def test_lane_operations_match_numpy_at_any_offset():
 def test_lane_groups_round_trip_and_pack_the_lower_triangle():
     rng = np.random.default_rng(1)
     columns = rng.standard_normal((3 * W, 5))
-    groups = _to_lanes(columns)
+    groups = to_lanes(columns)
     assert groups.shape == (3, 5 * W)
     assert groups[1, 2 * W + 3] == columns[W + 3, 2]          # entry 2 of column W + 3
-    np.testing.assert_array_equal(_from_lanes(groups), columns)
+    np.testing.assert_array_equal(from_lanes(groups), columns)
     d = 4
     i, j = np.tril_indices(d)
     sym = rng.standard_normal((d, d))
@@ -43,9 +42,9 @@ def test_compact_lanes_moves_the_kept_columns_to_the_front_in_order():
     columns = rng.standard_normal((4 * W, 7))
     keep = rng.random(4 * W) < 0.4
     keep[[0, 5, 4 * W - 1]] = [False, True, True]
-    groups = _to_lanes(columns)
+    groups = to_lanes(columns)
     src = np.flatnonzero(keep)
     compact_lanes(groups, src)
-    out = _from_lanes(groups)
+    out = from_lanes(groups)
     np.testing.assert_array_equal(out[:len(src)], columns[src])
     np.testing.assert_array_equal(out[len(src):], columns[len(src):])   # left as they were

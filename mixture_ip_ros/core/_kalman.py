@@ -162,6 +162,19 @@ def basis_rows(z, centers, width):
     return out
 
 
+def to_lanes(columns):
+    """Per-column rows (C, m), C a multiple of W, to kalman_update's lane groups (C / W, m W)."""
+    C, m = columns.shape
+    return np.ascontiguousarray(columns.reshape(C // W, W, m).transpose(0, 2, 1)).reshape(
+        C // W, m * W)
+
+
+def from_lanes(groups):
+    """Inverse of to_lanes (a copy)."""
+    G, mW = groups.shape
+    return groups.reshape(G, mW // W, W).transpose(0, 2, 1).reshape(G * W, mW // W)
+
+
 def tri_index(d):
     """(d, d) positions of Sigma[i, j] in the packed lower triangle (both halves)."""
     i, j = np.indices((d, d))

@@ -13,7 +13,8 @@ on the observed weights alone, w_c | D follows from w_o | D through B_k = Sigma_
 import numpy as np
 from scipy import linalg
 
-from ._kalman import W, basis_rows, compact_lanes, kalman_update, mean_trajectory, tri_index
+from ._kalman import (W, basis_rows, compact_lanes, from_lanes, kalman_update, mean_trajectory,
+                      to_lanes, tri_index)
 from .interaction import trajectory_distribution
 from .phase import alpha_grid, alpha_log_prior
 
@@ -29,12 +30,12 @@ class OnlineEstimator:
     ``prune_below``: after each observation, hypotheses whose posterior probability is below
     this are dropped and no longer updated (0, the default: none is, the posterior is exact).
     The ones kept are exact: their log evidence and posterior weights are those of eqs. 17-18
-    given every observation absorbed; the posterior is renormalised over them. ``pruned_mass`` sums the
-    probabilities of the dropped ones when they were dropped (each below ``prune_below``; a
-    dropped hypothesis is not revived, so this bounds the mass dropped at each pruning, not
-    what later evidence could have given it). Samples absorbed out of order (``absorb``) can
-    change which hypotheses are dropped, never the exactness of the kept ones. It must be
-    below 1 / (K M), so that the most probable hypothesis is always kept.
+    given every observation absorbed; the posterior is renormalised over them.
+    ``pruned_mass`` sums the probabilities of the dropped ones when they were dropped (each
+    below ``prune_below``). A dropped hypothesis is not revived, so this bounds the mass
+    dropped at each pruning, not what later evidence could have given it. Samples absorbed out
+    of order (``absorb``) can change which hypotheses are dropped, never the exactness of the
+    kept ones. It must be below 1 / (K M), so that the most probable hypothesis is kept.
     """
 
     def __init__(self, model, n_alpha: int = 50, min_interval: float = 0.05,
@@ -59,9 +60,9 @@ class OnlineEstimator:
         self._tri = tri_index(do)
         lower = np.tril_indices(do)
         self._hyp0 = np.r_[np.arange(K * M), np.zeros(-(K * M) % W, dtype=int)]
-        self._cov0 = _to_lanes(np.repeat(model.covariances_[:, lower[0], lower[1]], M, 0)
+        self._cov0 = to_lanes(np.repeat(model.covariances_[:, lower[0], lower[1]], M, 0)
                                [self._hyp0])
-        self._mu0 = _to_lanes(np.repeat(model.means_[:, :do], M, 0)[self._hyp0])
+        self._mu0 = to_lanes(np.repeat(model.means_[:, :do], M, 0)[self._hyp0])
         self._noise = np.ascontiguousarray(model.observed_noise_var_, dtype=float)
         # Regression of controlled on observed weights per component (exact conditioning).
         self._gain, self._cond_cov = [], []
@@ -191,7 +192,7 @@ class OnlineEstimator:
         d = self.n_observed * self.n_basis
         out = np.full((len(self._col), d), np.nan)
         n = self.n_tracked
-        out[self._hyp[:n]] = _from_lanes(self._mu)[:n]
+        out[self._hyp[:n]] = from_lanes(self._mu)[:n]
         return out
 
     @property
@@ -200,7 +201,7 @@ class OnlineEstimator:
         d = self.n_observed * self.n_basis
         out = np.full((len(self._col), d, d), np.nan)
         n = self.n_tracked
-        out[self._hyp[:n]] = _from_lanes(self._cov)[:n][:, self._tri]
+        out[self._hyp[:n]] = from_lanes(self._cov)[:n][:, self._tri]
         return out
 
     def joint_posterior(self):
@@ -320,15 +321,3 @@ class OnlineEstimator:
         out = trajectory_distribution(mean, cov, self.model.basis_, [1.0], 1.0, dofs)
         return out['position'][0], out['position_cov'][0]
 
-
-def _to_lanes(columns):
-    """Per-column rows (C, m), C a multiple of W, to the kernel's lane groups (C / W, m W)."""
-    C, m = columns.shape
-    return np.ascontiguousarray(columns.reshape(C // W, W, m).transpose(0, 2, 1)).reshape(
-        C // W, m * W)
-
-
-def _from_lanes(groups):
-    """Inverse of _to_lanes (a copy)."""
-    G, mW = groups.shape
-    return groups.reshape(G, mW // W, W).transpose(0, 2, 1).reshape(G * W, mW // W)
