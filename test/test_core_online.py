@@ -257,6 +257,7 @@ def test_pruning_keeps_the_kept_hypotheses_exact_and_tracks_the_dropped_mass(mod
     assert pruned.n_tracked < 36 / 4 and pruned.pruned_mass == pytest.approx(mass, rel=1e-12)
     assert 0 < pruned.pruned_mass < (36 - pruned.n_tracked) * tau
     assert pruned.map_hypothesis() == exact.map_hypothesis()
+    assert exact.prune() == 0 and exact.n_tracked == 36          # prune_below = 0: exact
     k, m = np.argwhere(~tracked.reshape(3, -1))[0]
     assert pruned.joint_posterior()[k, m] == 0 and pruned.log_evidence[k, m] == -np.inf
     assert np.isnan(pruned.mu[k * 12 + m]).all() and np.isnan(pruned.sigma[k * 12 + m]).all()
@@ -272,24 +273,30 @@ def test_pruning_keeps_the_kept_hypotheses_exact_and_tracks_the_dropped_mass(mod
                                OnlineEstimator(model, n_alpha=12).joint_posterior(), atol=1e-15)
 
 
-def test_pruning_with_samples_absorbed_in_any_order_keeps_the_kept_ones_exact(model_and_demos):
-    """absorb in a shuffled order (held samples after live ones): the hypotheses kept have the
-    batch eq. 18 log evidence of all the samples, the posterior is finite and sums to one."""
+def test_samples_absorbed_in_any_order_then_pruned_give_one_result(model_and_demos):
+    """absorb does not prune: held samples absorbed after live ones, in a shuffled order, then
+    prune(), keep the hypotheses the time-ordered absorb + prune() keeps, with the batch eq. 18
+    log evidence of all the samples."""
     model, demos, _ = model_and_demos
     t, Y = _stream(demos[30])
     t, Y = t[::3], Y[::3]
-    order = np.random.default_rng(3).permutation(len(t))
-    est = OnlineEstimator(model, n_alpha=12, min_interval=0.0, prune_below=1e-12)
-    for i in order:
-        est.absorb(t[i], Y[i])
-    assert est.n_tracked < 36
-    joint = est.joint_posterior()
-    assert np.isfinite(joint).all() and joint.sum() == pytest.approx(1.0)
+    estimators = []
+    for order in (np.arange(len(t)), np.random.default_rng(3).permutation(len(t))):
+        est = OnlineEstimator(model, n_alpha=12, min_interval=0.0, prune_below=1e-12)
+        for i in order:
+            est.absorb(t[i], Y[i])
+        assert est.n_tracked == 36
+        assert est.prune() == 36 - est.n_tracked > 0 and est.prune() == 0
+        estimators.append(est)
+    ordered, shuffled = estimators
+    np.testing.assert_array_equal(shuffled.joint_posterior() > 0, ordered.joint_posterior() > 0)
+    np.testing.assert_allclose(shuffled.joint_posterior(), ordered.joint_posterior(), atol=1e-9)
+    assert shuffled.joint_posterior().sum() == pytest.approx(1.0)
     do = model.n_observed_ * model.n_basis
-    for k, m in np.argwhere(joint > 0):
+    for k, m in np.argwhere(shuffled.joint_posterior() > 0):
         ref = log_evidence_batch(model.means_[k][:do], model.covariances_[k][:do, :do],
-                                 model.basis_, t, Y, est.alphas[m], model.observed_noise_var_)
-        assert est.log_evidence[k, m] == pytest.approx(ref, rel=1e-8)
+                                 model.basis_, t, Y, shuffled.alphas[m], model.observed_noise_var_)
+        assert shuffled.log_evidence[k, m] == pytest.approx(ref, rel=1e-8)
 
 
 def test_pruning_never_empties_the_posterior_or_makes_it_nan(model_and_demos):

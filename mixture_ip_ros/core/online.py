@@ -27,15 +27,15 @@ class OnlineEstimator:
     a person's path and the model is smooth), so feeding 100+ Hz as independent evidence
     makes the posterior overconfident; 20 Hz is about the bandwidth of the residual.
 
-    ``prune_below``: after each observation, hypotheses whose posterior probability is below
-    this are dropped and no longer updated (0, the default: none is, the posterior is exact).
-    The ones kept are exact: their log evidence and posterior weights are those of eqs. 17-18
-    given every observation absorbed; the posterior is renormalised over them.
-    ``pruned_mass`` sums the probabilities of the dropped ones when they were dropped (each
-    below ``prune_below``). A dropped hypothesis is not revived, so this bounds the mass
-    dropped at each pruning, not what later evidence could have given it. Samples absorbed out
-    of order (``absorb``) can change which hypotheses are dropped, never the exactness of the
-    kept ones. It must be below 1 / (K M), so that the most probable hypothesis is kept.
+    ``prune_below``: after each update (and at each :meth:`prune`), hypotheses whose posterior
+    probability is below this are dropped and no longer updated (0, the default: none is, the
+    posterior is exact). The ones kept are exact: their log evidence and posterior weights are
+    those of eqs. 17-18 given every observation absorbed; the posterior is renormalised over
+    them. ``pruned_mass`` sums the probabilities of the dropped ones when they were dropped
+    (each below ``prune_below``). A dropped hypothesis is not revived, so this bounds the mass
+    dropped at each pruning, not what later evidence could have given it. ``absorb`` does not
+    prune, so samples absorbed in any order and then pruned give one result. It must be below
+    1 / (K M), so that the most probable hypothesis is kept.
     """
 
     def __init__(self, model, n_alpha: int = 50, min_interval: float = 0.05,
@@ -98,6 +98,8 @@ class OnlineEstimator:
         if not self.admit(t):
             return False
         self._absorb(t, y)
+        if self.prune_below > 0.0:
+            self.prune()
         return True
 
     def admit(self, t: float) -> bool:
@@ -122,7 +124,8 @@ class OnlineEstimator:
 
         In any order: the weights do not change over the movement, so the posterior and the
         evidence after a set of observations do not depend on the order they were absorbed in
-        (the planner absorbs the samples held before an onset while live ones come in).
+        (the planner absorbs the samples held before an onset while live ones come in). It does
+        not prune: call :meth:`prune` once the samples held are in.
         """
         y = self._checked(y)
         if not (np.isfinite(t) and t >= 0):
@@ -136,22 +139,24 @@ class OnlineEstimator:
                       self.alphas, float(t), basis.centers, basis.width, y, self._noise,
                       self._prior, self._hyp, joint)
         self.n_observations += 1
-        if self.prune_below > 0.0:
-            self._prune(joint)
         self._joint = joint.reshape(self.n_components, -1)
         self._joint.flags.writeable = False
 
-    def _prune(self, joint):
-        """Drop the tracked hypotheses whose posterior ``joint`` is below prune_below (joint is
-        renormalised over the others); the kept columns move to the front, in order."""
+    def prune(self) -> int:
+        """Drop the tracked hypotheses whose posterior is now below ``prune_below`` (update
+        does this after each observation); returns how many. The posterior after absorbing a
+        set of samples in any order and then pruning does not depend on that order.
+        """
         hyp = self._hyp[:self.n_tracked]
+        joint = self.joint_posterior().ravel().copy()
         keep = joint[hyp] >= self.prune_below
         if keep.all():
-            return
+            return 0
         dropped = hyp[~keep]
         self.pruned_mass += float(joint[dropped].sum())
         joint[dropped] = 0.0
-        joint /= joint.sum()
+        self._joint = (joint / joint.sum()).reshape(self.n_components, -1)
+        self._joint.flags.writeable = False
         n = int(keep.sum())
         src = np.flatnonzero(keep)
         compact_lanes(self._cov, src)
@@ -161,6 +166,7 @@ class OnlineEstimator:
         self._col[:] = -1
         self._col[self._hyp[:n]] = np.arange(n)
         self.n_tracked = n
+        return len(dropped)
 
     def _checked(self, y) -> np.ndarray:
         y = np.asarray(y, dtype=float)
