@@ -194,6 +194,7 @@ def kalman_update(cov, mu, loglik, n, alpha_index, alphas, t, centers, width, y,
     """One observation ``y`` at ``t`` s, in place for the first ``n`` columns (the tracked
     hypotheses): Sigma and mu conditioned on y (eq. 4 in Kalman form), loglik += log N(y; H mu,
     H Sigma H^T + R) (the factor of eq. 18), and the posterior (eq. 16) into ``joint``.
+    Returns the smallest posterior probability of a tracked hypothesis.
 
     cov (groups, d (d + 1) / 2 W), mu (groups, d W) (see the module's layout); per column c:
     loglik[c], phase speed alphas[alpha_index[c]] (H = I_P kron psi(alpha t)^T, eq. 15 with
@@ -337,8 +338,11 @@ def kalman_update(cov, mu, loglik, n, alpha_index, alphas, t, centers, width, y,
         e = np.exp(log_prior[c] + loglik[c] - top)
         joint[hypothesis[c]] = e
         total += e
+    smallest = 1.0
     for c in range(n):
         joint[hypothesis[c]] /= total
+        smallest = min(smallest, joint[hypothesis[c]])
+    return smallest
 
 
 @numba.njit(cache=True, boundscheck=False)

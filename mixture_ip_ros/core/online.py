@@ -87,6 +87,7 @@ class OnlineEstimator:
         self.n_observations = 0
         self.t_last = None
         self._joint = None      # p(k, alpha_m | D), computed with each update
+        self._smallest = 0.0    # smallest p(k, alpha_m | D) of a tracked hypothesis (0: unknown)
 
     def update(self, t: float, y) -> bool:
         """Add the observed agent's position ``y`` (P,) at ``t`` seconds after onset.
@@ -135,9 +136,9 @@ class OnlineEstimator:
     def _absorb(self, t, y):
         joint = np.empty(len(self._col))
         basis = self.model.basis_
-        kalman_update(self._cov, self._mu, self._loglik, self.n_tracked, self._alpha_index,
-                      self.alphas, float(t), basis.centers, basis.width, y, self._noise,
-                      self._prior, self._hyp, joint)
+        self._smallest = kalman_update(self._cov, self._mu, self._loglik, self.n_tracked,
+                                       self._alpha_index, self.alphas, float(t), basis.centers,
+                                       basis.width, y, self._noise, self._prior, self._hyp, joint)
         self.n_observations += 1
         self._joint = joint.reshape(self.n_components, -1)
         self._joint.flags.writeable = False
@@ -147,16 +148,18 @@ class OnlineEstimator:
         does this after each observation); returns how many. The posterior after absorbing a
         set of samples in any order and then pruning does not depend on that order.
         """
+        if self._smallest >= self.prune_below:
+            return 0
         hyp = self._hyp[:self.n_tracked]
         joint = self.joint_posterior().ravel().copy()
         keep = joint[hyp] >= self.prune_below
-        if keep.all():
-            return 0
         dropped = hyp[~keep]
         self.pruned_mass += float(joint[dropped].sum())
         joint[dropped] = 0.0
-        self._joint = (joint / joint.sum()).reshape(self.n_components, -1)
+        joint /= joint.sum()
+        self._joint = joint.reshape(self.n_components, -1)
         self._joint.flags.writeable = False
+        self._smallest = joint[hyp[keep]].min()
         n = int(keep.sum())
         src = np.flatnonzero(keep)
         compact_lanes(self._cov, src)
