@@ -1,7 +1,16 @@
 """Online estimator update cost vs. naive batch recomputation of eq. 18 (same run).
 
 K = 3 components, M = 50 alpha hypotheses, 15 basis functions per DOF, 3 observed + 7
-controlled DOFs. Prints one JSON object.
+controlled DOFs: a stream of 1000 observations at 1 kHz along a demonstration, each update
+followed by the posterior query (as the estimator node does). Also in the same run:
+
+- ``pruned``: the same stream with ``prune_below`` (hypotheses below it are dropped), its time,
+  how many hypotheses are tracked at the end, the mass dropped, and the largest difference of
+  its posterior from the exact one over the stream;
+- ``scaling``: the exact update for K = 3, 6, 12 components and M = 50, 100 alpha hypotheses
+  (models fitted to K sampled patterns), so that the cost of more patterns is known.
+
+Prints one JSON object.
 """
 
 import json
@@ -17,6 +26,8 @@ from mixture_ip_ros.core.online import OnlineEstimator  # noqa: E402
 from mixture_ip_ros.core.phase import log_evidence_batch  # noqa: E402
 from mixture_ip_ros.scenarios.synthetic import mixture_demos  # noqa: E402
 
+PRUNE_BELOW = 1e-12
+
 
 def naive_update_us(model, alphas, t, Y, reps):
     do = model.n_observed_ * model.n_basis
@@ -31,16 +42,16 @@ def naive_update_us(model, alphas, t, Y, reps):
     return float(np.median(times) * 1e6)
 
 
-def main():
-    demos, _, _, _ = mixture_demos(seed=0, n_obs=3, n_ctrl=7, n_basis=15)
-    model = MixtureIProMP(3, n_basis=15).fit(demos)
-    est = OnlineEstimator(model, n_alpha=50, min_interval=0.0)
-    demo = max(demos, key=lambda d: d.duration)
-    rng = np.random.default_rng(0)
-    # Stream of 1000 observations at 1 kHz along a demonstration (interpolated) with noise.
-    t = np.linspace(1e-3, 1.0, 1000)
-    y = np.stack([np.interp(t * demo.duration, demo.t, demo.observed[:, j]) for j in range(3)], 1)
-    y += 0.002 * rng.standard_normal(y.shape)
+def stream(demo, n=1000, seed=0):
+    """n observations at 1 kHz along ``demo`` played in one second, with 2 mm noise."""
+    t = np.linspace(1e-3, 1.0, n)
+    y = np.stack([np.interp(t * demo.duration, demo.t, demo.observed[:, j])
+                  for j in range(demo.observed.shape[1])], 1)
+    return t, y + 0.002 * np.random.default_rng(seed).standard_normal(y.shape)
+
+
+def timed_updates(est, t, y, on_update=None):
+    """Per-observation time (us) of update + joint_posterior over the stream."""
     est.update(t[0], y[0])                                  # compile / warm up
     est.reset()
     times = []
@@ -49,15 +60,53 @@ def main():
         est.update(ti, yi)
         est.joint_posterior()
         times.append(time.perf_counter() - t0)
-    times = np.array(times) * 1e6
-    result = {'update_us_median': float(np.median(times)),
-              'update_us_p99': float(np.percentile(times, 99))}
+        if on_update is not None:
+            on_update(est)
+    return np.array(times) * 1e6
+
+
+def stats(times):
+    return {'update_us_median': float(np.median(times)),
+            'update_us_p99': float(np.percentile(times, 99))}
+
+
+def scaling():
+    out = {}
+    for K in (3, 6, 12):
+        demos = mixture_demos(seed=K, counts=(12,) * K, n_obs=3, n_ctrl=7, n_basis=15,
+                              durations=((1.0, 2.4),) * K)[0]
+        model = MixtureIProMP(K, n_basis=15).fit(demos)
+        t, y = stream(max(demos, key=lambda d: d.duration))
+        for M in (50, 100):
+            times = timed_updates(OnlineEstimator(model, n_alpha=M, min_interval=0.0), t, y)
+            out[f'K{K}_M{M}'] = {'hypotheses': K * M, **stats(times),
+                                 'us_per_hypothesis': float(np.median(times) / (K * M))}
+    return out
+
+
+def main():
+    demos, _, _, _ = mixture_demos(seed=0, n_obs=3, n_ctrl=7, n_basis=15)
+    model = MixtureIProMP(3, n_basis=15).fit(demos)
+    est = OnlineEstimator(model, n_alpha=50, min_interval=0.0)
+    t, y = stream(max(demos, key=lambda d: d.duration))
+    exact_joints = []
+    result = stats(timed_updates(est, t, y, lambda e: exact_joints.append(e.joint_posterior())))
     for m, reps in ((50, 5), (200, 3), (500, 2)):
         idx = np.linspace(0, len(t) - 1, m).astype(int)
         result[f'naive_us_m{m}'] = naive_update_us(model, est.alphas, t[idx], y[idx], reps)
     result['speedup_m500'] = result['naive_us_m500'] / result['update_us_median']
-    result['hypotheses'] = int(est.sigma.shape[0])
-    result['observed_weight_dim'] = int(est.sigma.shape[1])
+    result['hypotheses'] = int(est.log_evidence.size)
+    result['observed_weight_dim'] = int(est.n_observed * est.n_basis)
+
+    pruned = OnlineEstimator(model, n_alpha=50, min_interval=0.0, prune_below=PRUNE_BELOW)
+    joints = []
+    times = timed_updates(pruned, t, y, lambda e: joints.append(e.joint_posterior()))
+    result['pruned'] = {'prune_below': PRUNE_BELOW, **stats(times),
+                        'tracked_at_end': int(pruned.n_tracked),
+                        'pruned_mass': pruned.pruned_mass,
+                        'max_abs_posterior_difference': float(np.max(np.abs(
+                            np.array(joints) - np.array(exact_joints))))}
+    result['scaling'] = scaling()
     print(json.dumps(result))
 
 

@@ -167,10 +167,15 @@ def test_follows_a_simulated_clock_and_holds_while_paused(harness, bag):
     pb = Playback(harness, path, rewrite_stamps=True, use_sim_time=True)
     player = pb.player
     present = ~np.isnan(xyz).any(axis=1)
+    offsets = np.sort(np.concatenate([t[present], t])) * 1e9       # every message, from 0
     step = 6_000_000
     now = [SIM_START_NS]
 
-    def advance():
+    def advance(paused_ns=0):
+        # The clock moves on only once everything due so far is out: the pace is the clock's,
+        # however slowly the playback thread gets to run.
+        due = int(np.sum(offsets <= now[0] - SIM_START_NS - paused_ns + 1))
+        harness.spin_until(lambda: player.published >= due, what='the due messages')
         now[0] += step
         harness.set_clock(now[0])
     harness.set_clock(now[0])
@@ -178,14 +183,16 @@ def test_follows_a_simulated_clock_and_holds_while_paused(harness, bag):
     while player.published < 40:       # the clock runs
         advance()
     player.pause()
+    harness.spin_until(lambda: player.holding, what='playback to pause')
     pause_ns = 300_000_000
     for _ in range(pause_ns // step):  # 0.3 s of simulated time while paused
-        advance()
+        now[0] += step
+        harness.set_clock(now[0])
     player.resume()
     harness.spin_until(lambda: player.paused_total > 0, what='playback to resume')
     assert player.paused_total * 1e9 == pytest.approx(pause_ns, abs=step)
     while not player.finished:
-        advance()
+        advance(round(player.paused_total * 1e9))
     pb.received(present.sum(), t.size)
     assert np.all(np.array(player.recent_lateness) >= 0)     # never early (simulated s)
     stamps = np.array([stamp_to_ns(m.header.stamp) for m in pb.joints])

@@ -241,3 +241,121 @@ def test_per_component_noise_online_equals_batch_eq18_with_each_components_noise
                                      model.basis_, demo.t[idx], demo.observed[idx],
                                      est.alphas[m], model.observed_noise_var_[k])
             assert est.log_evidence[k, m] == pytest.approx(ref, rel=1e-8)
+
+
+def test_every_hypothesis_posterior_equals_dense_conditioning(model_and_demos):
+    """mu and Sigma of each (k, alpha_m), read back from the lane groups, against eqs. 3-5 with
+    the dense observed-agent block (phases alpha_m t)."""
+    model, demos, _ = model_and_demos
+    est = OnlineEstimator(model, n_alpha=7, min_interval=0.0)     # 21 columns: a partial group
+    demo = demos[11]
+    idx = np.arange(0, int(0.6 * len(demo.t)), 7)
+    for i in idx:
+        est.update(demo.t[i], demo.observed[i])
+    do = model.n_observed_ * model.n_basis
+    mu, sigma = est.mu, est.sigma
+    for k in range(3):
+        for m, a in enumerate(est.alphas):
+            mean, cov = condition_on_observed(model.means_[k], model.covariances_[k],
+                                              model.basis_, model.n_observed_, a * demo.t[idx],
+                                              demo.observed[idx], model.observed_noise_var_)
+            h = k * len(est.alphas) + m
+            np.testing.assert_allclose(mu[h], mean[:do], rtol=1e-8, atol=1e-10)
+            np.testing.assert_allclose(sigma[h], cov[:do, :do], rtol=1e-7, atol=1e-12)
+            got = est.observed_weights(k, m)
+            np.testing.assert_array_equal(got[0], mu[h])
+            np.testing.assert_array_equal(got[1], sigma[h])
+
+
+def _stream(demo, stop=0.8):
+    n = int(stop * len(demo.t))
+    return demo.t[:n], demo.observed[:n]
+
+
+def test_pruning_keeps_the_kept_hypotheses_exact_and_tracks_the_dropped_mass(model_and_demos):
+    """Side by side with the exact estimator: each hypothesis is dropped only when its posterior,
+    renormalised over those still tracked, is below prune_below; pruned_mass adds exactly those
+    probabilities; the kept ones have the exact log evidence and the exact posterior
+    renormalised over them."""
+    model, demos, _ = model_and_demos
+    tau = 1e-12
+    exact = OnlineEstimator(model, n_alpha=12, min_interval=0.0)
+    pruned = OnlineEstimator(model, n_alpha=12, min_interval=0.0, prune_below=tau)
+    tracked = np.ones(exact.log_evidence_flat.size, dtype=bool)
+    mass = 0.0
+    for t, y in zip(*_stream(demos[4])):
+        exact.update(t, y)
+        pruned.update(t, y)
+        lp = exact._log_prior + exact.log_evidence_flat
+        p = np.where(tracked, np.exp(lp - lp[tracked].max()), 0.0)
+        p /= p.sum()
+        now = np.isfinite(pruned.log_evidence_flat)
+        assert not (now & ~tracked).any()
+        dropped = tracked & ~now
+        assert np.all(p[dropped] < tau)
+        mass += p[dropped].sum()
+        tracked = now
+        assert pruned.n_tracked == tracked.sum()
+        np.testing.assert_allclose(pruned.log_evidence_flat[tracked],
+                                   exact.log_evidence_flat[tracked], rtol=1e-12)
+        q = np.where(tracked, p, 0.0)
+        np.testing.assert_allclose(pruned.joint_posterior().ravel(), q / q.sum(), atol=1e-12)
+    assert pruned.n_tracked < 36 / 4 and pruned.pruned_mass == pytest.approx(mass, rel=1e-12)
+    assert 0 < pruned.pruned_mass < (36 - pruned.n_tracked) * tau
+    assert pruned.map_hypothesis() == exact.map_hypothesis()
+    assert exact.prune() == 0 and exact.n_tracked == 36          # prune_below = 0: exact
+    k, m = np.argwhere(~tracked.reshape(3, -1))[0]
+    assert pruned.joint_posterior()[k, m] == 0 and pruned.log_evidence[k, m] == -np.inf
+    assert np.isnan(pruned.mu[k * 12 + m]).all() and np.isnan(pruned.sigma[k * 12 + m]).all()
+    with pytest.raises(ValueError, match='pruned'):
+        pruned.observed_weights(k, m)
+    z = np.linspace(0, 1, 5)
+    np.testing.assert_allclose(pruned.predict(z)['controlled']['position'],
+                               exact.predict(z)['controlled']['position'], atol=1e-9)
+    pruned.reset()
+    assert pruned.n_tracked == 36 and pruned.pruned_mass == 0
+    assert np.isfinite(pruned.log_evidence).all()
+    np.testing.assert_allclose(pruned.joint_posterior(),
+                               OnlineEstimator(model, n_alpha=12).joint_posterior(), atol=1e-15)
+
+
+def test_samples_absorbed_in_any_order_then_pruned_give_one_result(model_and_demos):
+    """absorb does not prune: held samples absorbed after live ones, in a shuffled order, then
+    prune(), keep the hypotheses the time-ordered absorb + prune() keeps, with the batch eq. 18
+    log evidence of all the samples."""
+    model, demos, _ = model_and_demos
+    t, Y = _stream(demos[30])
+    t, Y = t[::3], Y[::3]
+    estimators = []
+    for order in (np.arange(len(t)), np.random.default_rng(3).permutation(len(t))):
+        est = OnlineEstimator(model, n_alpha=12, min_interval=0.0, prune_below=1e-12)
+        for i in order:
+            est.absorb(t[i], Y[i])
+        assert est.n_tracked == 36
+        assert est.prune() == 36 - est.n_tracked > 0 and est.prune() == 0
+        estimators.append(est)
+    ordered, shuffled = estimators
+    np.testing.assert_array_equal(shuffled.joint_posterior() > 0, ordered.joint_posterior() > 0)
+    np.testing.assert_allclose(shuffled.joint_posterior(), ordered.joint_posterior(), atol=1e-9)
+    assert shuffled.joint_posterior().sum() == pytest.approx(1.0)
+    do = model.n_observed_ * model.n_basis
+    for k, m in np.argwhere(shuffled.joint_posterior() > 0):
+        ref = log_evidence_batch(model.means_[k][:do], model.covariances_[k][:do, :do],
+                                 model.basis_, t, Y, shuffled.alphas[m], model.observed_noise_var_)
+        assert shuffled.log_evidence[k, m] == pytest.approx(ref, rel=1e-8)
+
+
+def test_pruning_never_empties_the_posterior_or_makes_it_nan(model_and_demos):
+    """Observations no hypothesis explains (a wrist 50 m away) give log evidences of -1e9 and
+    below: the most probable hypothesis is always kept."""
+    model, _, _ = model_and_demos
+    est = OnlineEstimator(model, n_alpha=12, min_interval=0.0, prune_below=1.0 / 36 - 1e-9)
+    for i, t in enumerate(np.linspace(0.05, 2.0, 30)):
+        est.update(t, [50.0 * (-1) ** i, -50.0, 50.0])
+        joint = est.joint_posterior()
+        assert est.n_tracked >= 1 and np.isfinite(joint).all()
+        assert joint.sum() == pytest.approx(1.0)
+    assert np.isfinite(est.predict([0.5])['controlled']['position']).all()
+    for bad in (-1e-3, 1.0 / 36, 0.5):
+        with pytest.raises(ValueError, match='prune_below'):
+            OnlineEstimator(model, n_alpha=12, prune_below=bad)

@@ -791,3 +791,31 @@ def test_a_plan_resting_on_another_clock_is_not_sent(trained):
     assert planner.counts.plan_refusals == {'invalid': 0, 'beyond_limits': 0, 'off_clock': 1}
     planner.observe(onset + _ns(demo.t[-1] + 0.01), demo.observed[-1])
     assert planner.replan(now_ns=onset + _ns(demo.t[-1] + 0.02)).send   # on the clock: sent
+
+
+def test_pruning_waits_for_the_held_samples_and_keeps_the_decision(trained):
+    """With pruning, the planner prunes only once no held sample waits (so the order of
+    absorption cannot matter) and commits to the same component at the same observation."""
+    model, meta, held = trained
+    demo = held[1]
+    runs = {}
+    for prune in (0.0, 1e-12):
+        planner = OnlinePlanner(OnlineEstimator(model, prune_below=prune),
+                                PlannerSettings(backlog_slice=1))
+        n_held = len(demo.t) // 3
+        for t, y in zip(demo.t[:n_held], demo.observed[:n_held]):
+            planner.observe(_ns(t), y)
+        planner.onset(0)
+        tracked = []
+        commit = None
+        for t, y in zip(demo.t[n_held:], demo.observed[n_held:]):
+            planner.observe(_ns(t), y)
+            tracked.append((planner.n_backlog, planner.estimator.n_tracked))
+            step = planner.replan()
+            if commit is None and step is not None and step.committed_now:
+                commit = (planner.current.commit_observations, step.plan.component)
+        runs[prune] = (commit, tracked)
+    assert runs[1e-12][0] == runs[0.0][0] is not None
+    n_all = OnlineEstimator(model).log_evidence_flat.size
+    assert all(n == n_all for backlog, n in runs[1e-12][1] if backlog)     # none while held
+    assert runs[1e-12][1][-1][1] < n_all                                  # pruned after

@@ -1,129 +1,369 @@
 """Compiled inner loops of the online estimator: one observation, every hypothesis
 (kalman_update), and the mean trajectory that a robot command needs (mean_trajectory).
 
-Per hypothesis h the observed-agent weights have N(mu[h], sigma[h]); the observation
+Per hypothesis h the observed-agent weights have N(mu_h, Sigma_h); the observation
 y = (I_P kron psi_h^T) w + e, e ~ N(0, diag(noise)). The update factors S = L L^T (P x P) and
-applies G = L^-1 H Sigma, Sigma -= G^T G, which keeps Sigma exactly symmetric and positive
-definite over thousands of updates (the textbook K H Sigma form drifts). Cost O(P d^2) per
-hypothesis, no allocation in the loop.
+applies G = L^-1 H Sigma, Sigma -= G^T G, which keeps Sigma positive definite over thousands
+of updates (the textbook K H Sigma form drifts). Cost O(P d^2) per hypothesis.
+
+Layout: hypotheses (columns) in groups of W = 8 lanes, each group contiguous, so one SIMD
+register holds one entry of eight hypotheses and a group's state (d (d + 1) / 2 W doubles)
+is streamed once per pass. Sigma is stored as its lower triangle only (symmetric by
+construction, half the update): entry (i, j), j <= i, of column c = g W + l is
+cov[g, (i (i + 1) / 2 + j) W + l]; mu[g, i W + l] is entry i of its mean. The columns of the
+groups past the tracked ones, and the lanes past them in the last group, hold valid states
+that are updated with the others and never read (see OnlineEstimator's pruning).
 """
+
+import operator
 
 import numba
 import numpy as np
+from llvmlite import ir
+from numba.core import cgutils, types
+from numba.extending import intrinsic, models, overload, register_model
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
+
+
+# ------------------------------------------------------------------ SIMD lanes
+# Eight float64 lanes as one value in compiled code (an LLVM <8 x double>). numba vectorises
+# only innermost loops, and only where it can check that the arrays a loop writes do not
+# overlap those it reads, so a loop that keeps partial sums in registers across rows, or
+# writes two outputs, stays scalar; with an explicit lane type the kernel holds eight
+# hypotheses' values in one register and reuses it. LLVM lowers the type to what the CPU has
+# (one AVX-512 register, two AVX2 ones, four SSE2/NEON ones). In compiled code only:
+# vload(a, i) / vstore(a, i, v) read / write a[i:i + W] of a 1-D C-contiguous float64 array
+# without bounds checks (the caller keeps i + W <= len(a)); vsplat(x) has x in every lane;
+# +, -, *, / are lane-wise and may fuse a multiply-add (as fastmath={'contract'}); vsqrt is the
+# lane-wise square root. (Here rather than in a module of its own: numba's cache of a kernel
+# is invalidated by edits to the kernel's file only.)
+
+W = 8
+_LANES = ir.VectorType(ir.DoubleType(), W)
+_CONTRACT = ('contract',)
+
+
+class _VecType(types.Type):
+    def __init__(self):
+        super().__init__(name=f'f64x{W}')
+
+
+vec = _VecType()
+
+
+@register_model(_VecType)
+class _VecModel(models.PrimitiveModel):
+    def __init__(self, dmm, fe_type):
+        super().__init__(dmm, fe_type, _LANES)
+
+
+def _is_row(a):
+    return isinstance(a, types.Array) and a.dtype == types.float64 and a.ndim == 1 \
+        and a.layout == 'C'
+
+
+def _lanes_pointer(context, builder, aryty, ary, i):
+    data = context.make_array(aryty)(context, builder, ary).data
+    return builder.bitcast(builder.gep(data, [i]), _LANES.as_pointer())
+
+
+@intrinsic
+def vload(typingctx, a, i):
+    if not (_is_row(a) and isinstance(i, types.Integer)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        return builder.load(_lanes_pointer(context, builder, sig.args[0], args[0], args[1]),
+                            align=8)
+    return vec(a, i), codegen
+
+
+@intrinsic
+def vstore(typingctx, a, i, v):
+    if not (_is_row(a) and isinstance(i, types.Integer) and v == vec):
+        return None
+
+    def codegen(context, builder, sig, args):
+        builder.store(args[2], _lanes_pointer(context, builder, sig.args[0], args[0], args[1]),
+                      align=8)
+        return context.get_dummy_value()
+    return types.none(a, i, v), codegen
+
+
+@intrinsic
+def vsplat(typingctx, x):
+    if not isinstance(x, types.Float):
+        return None
+
+    def codegen(context, builder, sig, args):
+        x = context.cast(builder, args[0], sig.args[0], types.float64)
+        one = builder.insert_element(ir.Constant(_LANES, ir.Undefined), x,
+                                     ir.Constant(ir.IntType(32), 0))
+        return builder.shuffle_vector(one, one, ir.Constant(ir.VectorType(ir.IntType(32), W),
+                                                             [0] * W))
+    return vec(x), codegen
+
+
+@intrinsic
+def vsqrt(typingctx, v):
+    if v != vec:
+        return None
+
+    def codegen(context, builder, sig, args):
+        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(_LANES, [_LANES]),
+                                            f'llvm.sqrt.v{W}f64')
+        return builder.call(fn, [args[0]])
+    return vec(v), codegen
+
+
+def _lanewise(name):
+    @intrinsic
+    def op(typingctx, a, b):
+        if not (a == vec and b == vec):
+            return None
+
+        def codegen(context, builder, sig, args):
+            return getattr(builder, name)(args[0], args[1], flags=_CONTRACT)
+        return vec(a, b), codegen
+
+    def impl(a, b):
+        if a == vec and b == vec:
+            return lambda a, b: op(a, b)
+    return impl
+
+
+for _op, _name in ((operator.add, 'fadd'), (operator.sub, 'fsub'), (operator.mul, 'fmul'),
+                   (operator.truediv, 'fdiv')):
+    overload(_op)(_lanewise(_name))
+
+
+@numba.njit(cache=True, fastmath=False, boundscheck=False)
+def _basis_row(z, centers, width, out):
+    """psi(z) of GaussianBasis (clamped to [0, 1]) into ``out`` (N,)."""
+    N = centers.shape[0]
+    inv = 0.5 / (width * width)
+    zc = min(max(z, 0.0), 1.0)
+    s = 0.0
+    for n in range(N):
+        e = zc - centers[n]
+        out[n] = np.exp(-e * e * inv)
+        s += out[n]
+    for n in range(N):
+        out[n] /= s
 
 
 @numba.njit(cache=True, fastmath=False, boundscheck=False)
 def basis_rows(z, centers, width):
     """psi(z) of GaussianBasis (clamped to [0, 1]) for each phase in z: (M, N)."""
-    M, N = z.shape[0], centers.shape[0]
-    out = np.empty((M, N))
-    inv = 0.5 / (width * width)
-    for m in range(M):
-        zc = min(max(z[m], 0.0), 1.0)
-        s = 0.0
-        for n in range(N):
-            e = zc - centers[n]
-            out[m, n] = np.exp(-e * e * inv)
-            s += out[m, n]
-        for n in range(N):
-            out[m, n] /= s
+    out = np.empty((z.shape[0], centers.shape[0]))
+    for m in range(z.shape[0]):
+        _basis_row(z[m], centers, width, out[m])
     return out
 
 
-@numba.njit(cache=True, fastmath=False, boundscheck=False)
-def kalman_update(sigma, mu, loglik, psi, psi_index, y, noise):
-    """In place: sigma (H, d, d), mu (H, d), loglik (H,) += log N(y; H mu, H Sigma H^T + R).
+def to_lanes(columns):
+    """Per-column rows (C, m), C a multiple of W, to kalman_update's lane groups (C / W, m W)."""
+    C, m = columns.shape
+    return np.ascontiguousarray(columns.reshape(C // W, W, m).transpose(0, 2, 1)).reshape(
+        C // W, m * W)
 
-    ``psi`` (M, N) basis rows per phase hypothesis, ``psi_index`` (H,) which row each
-    hypothesis uses.
+
+def from_lanes(groups):
+    """Inverse of to_lanes (a copy)."""
+    G, mW = groups.shape
+    return groups.reshape(G, mW // W, W).transpose(0, 2, 1).reshape(G * W, mW // W)
+
+
+def tri_index(d):
+    """(d, d) positions of Sigma[i, j] in the packed lower triangle (both halves)."""
+    i, j = np.indices((d, d))
+    hi, lo = np.maximum(i, j), np.minimum(i, j)
+    return hi * (hi + 1) // 2 + lo
+
+
+@numba.njit(cache=True, inline='always')
+def _tri(i, j):
+    return i * (i + 1) // 2 + j if j <= i else j * (j + 1) // 2 + i
+
+
+# 'contract' only: multiply-adds fused, no reassociation; every lane computed alike.
+@numba.njit(cache=True, fastmath={'contract'}, boundscheck=False)
+def kalman_update(cov, mu, loglik, n, alpha_index, alphas, t, centers, width, y, noise,
+                  log_prior, hypothesis, joint):
+    """One observation ``y`` at ``t`` s, in place for the first ``n`` columns (the tracked
+    hypotheses): Sigma and mu conditioned on y (eq. 4 in Kalman form), loglik += log N(y; H mu,
+    H Sigma H^T + R) (the factor of eq. 18), and the posterior (eq. 16) into ``joint``.
+    Returns the smallest posterior probability of a tracked hypothesis.
+
+    cov (groups, d (d + 1) / 2 W), mu (groups, d W) (see the module's layout); per column c:
+    loglik[c], phase speed alphas[alpha_index[c]] (H = I_P kron psi(alpha t)^T, eq. 15 with
+    ``centers``, ``width``), log_prior[c], and which hypothesis it is, hypothesis[c]; noise
+    (groups, P W) = diag R of each column, in the lane layout (tied across components or not). joint (K M,): p(k, alpha_m | D) renormalised over the tracked hypotheses, 0 for
+    the others.
     """
-    n_h, d, _ = sigma.shape
+    d = mu.shape[1] // W
     P = y.shape[0]
-    N = psi.shape[1]
-    HS = np.empty((P, d))
-    n_rows = -(-P // 3) * 3
-    G = np.zeros((n_rows, d))
-    Sy = np.empty((P, P))
-    L = np.zeros((P, P))
-    r = np.empty(P)
-    for h in range(n_h):
-        S = sigma[h]
-        phi = psi[psi_index[h]]
+    N = centers.shape[0]
+    psi = np.empty((alphas.shape[0], N))       # basis rows once per phase speed in use
+    done = np.zeros(alphas.shape[0], dtype=np.bool_)
+    phi = np.empty(N * W)
+    n_rows = -(-P // 3) * 3                    # G in groups of three rows (extra rows zero)
+    G = np.zeros(n_rows * d * W)
+    L = np.empty(P * P * W)
+    r = np.empty(P * W)
+    for g in range(-(-n // W)):
+        cov_g = cov[g]
+        mu_g = mu[g]
+        noise_g = noise[g]
+        for lane in range(W):
+            a = alpha_index[g * W + lane]
+            if not done[a]:
+                _basis_row(alphas[a] * t, centers, width, psi[a])
+                done[a] = True
+            for k in range(N):
+                phi[k * W + lane] = psi[a, k]
+        # H Sigma: G[p, j] = sum_k psi_k Sigma[pN + k, j], four columns j per pass.
         for p in range(P):
-            HSp = HS[p]
-            for j in range(d):
-                HSp[j] = 0.0
-            for n in range(N):
-                f = phi[n]
-                Srow = S[p * N + n]
-                for j in range(d):
-                    HSp[j] += f * Srow[j]
+            j = 0
+            while j < d:
+                if j + 4 <= d:
+                    a0 = a1 = a2 = a3 = vsplat(0.0)
+                    for k in range(N):
+                        i = p * N + k
+                        f = vload(phi, k * W)
+                        a0 = a0 + f * vload(cov_g, _tri(i, j) * W)
+                        a1 = a1 + f * vload(cov_g, _tri(i, j + 1) * W)
+                        a2 = a2 + f * vload(cov_g, _tri(i, j + 2) * W)
+                        a3 = a3 + f * vload(cov_g, _tri(i, j + 3) * W)
+                    o = (p * d + j) * W
+                    vstore(G, o, a0)
+                    vstore(G, o + W, a1)
+                    vstore(G, o + 2 * W, a2)
+                    vstore(G, o + 3 * W, a3)
+                    j += 4
+                else:
+                    a0 = vsplat(0.0)
+                    for k in range(N):
+                        a0 = a0 + vload(phi, k * W) * vload(cov_g, _tri(p * N + k, j) * W)
+                    vstore(G, (p * d + j) * W, a0)
+                    j += 1
+        # S = H Sigma H^T + R (lower half) and the residual y - H mu.
         for p in range(P):
-            for q in range(P):
-                acc = 0.0
-                for n in range(N):
-                    acc += HS[p, q * N + n] * phi[n]
-                Sy[p, q] = acc
-            Sy[p, p] += noise[p]
-            acc = 0.0
-            for n in range(N):
-                acc += phi[n] * mu[h, p * N + n]
-            r[p] = y[p] - acc
+            for q in range(p + 1):
+                a0 = vload(noise_g, p * W) if q == p else vsplat(0.0)
+                for k in range(N):
+                    a0 = a0 + vload(G, (p * d + q * N + k) * W) * vload(phi, k * W)
+                vstore(L, (p * P + q) * W, a0)
+            a0 = vsplat(y[p])
+            for k in range(N):
+                a0 = a0 - vload(phi, k * W) * vload(mu_g, (p * N + k) * W)
+            vstore(r, p * W, a0)
+        # S = L L^T in place.
         for i in range(P):
             for j in range(i + 1):
-                acc = Sy[i, j]
+                a0 = vload(L, (i * P + j) * W)
                 for q in range(j):
-                    acc -= L[i, q] * L[j, q]
+                    a0 = a0 - vload(L, (i * P + q) * W) * vload(L, (j * P + q) * W)
                 if i == j:
-                    L[i, i] = np.sqrt(acc)
+                    a0 = vsqrt(a0)
                 else:
-                    L[i, j] = acc / L[j, j]
-        logdet = 0.0
+                    a0 = a0 / vload(L, (j * P + j) * W)
+                vstore(L, (i * P + j) * W, a0)
+        # G = L^-1 H Sigma and r = L^-1 (y - H mu) in place.
         for p in range(P):
-            logdet += 2.0 * np.log(L[p, p])
-            inv = 1.0 / L[p, p]
-            Gp = G[p]
+            inv = vsplat(1.0) / vload(L, (p * P + p) * W)
             for j in range(d):
-                Gp[j] = HS[p, j]
+                a0 = vload(G, (p * d + j) * W)
+                for q in range(p):
+                    a0 = a0 - vload(L, (p * P + q) * W) * vload(G, (q * d + j) * W)
+                vstore(G, (p * d + j) * W, a0 * inv)
+            a0 = vload(r, p * W)
             for q in range(p):
-                lq = L[p, q]
-                Gq = G[q]
-                for j in range(d):
-                    Gp[j] -= lq * Gq[j]
-            for j in range(d):
-                Gp[j] *= inv
-            acc = r[p]
-            for q in range(p):
-                acc -= L[p, q] * r[q]
-            r[p] = acc * inv
-        quad = 0.0
-        for p in range(P):
-            quad += r[p] * r[p]
-        loglik[h] += -0.5 * (P * _LOG_2PI + logdet + quad)
-        for i in range(d):
-            acc = 0.0
+                a0 = a0 - vload(L, (p * P + q) * W) * vload(r, q * W)
+            vstore(r, p * W, a0 * inv)
+        # log N(y; H mu, S) = -(P log 2 pi + log det S + |r|^2) / 2, det S = prod L_pp^2.
+        for lane in range(W):
+            logdet, quad, prod = 0.0, 0.0, 1.0
             for p in range(P):
-                acc += G[p, i] * r[p]
-            mu[h, i] += acc
-        # Sigma -= G^T G, three rows of G per pass over Sigma (rows past P are zero): one
-        # load and store of Sigma per three products, 30 % faster than a pass per row.
+                prod *= L[(p * P + p) * W + lane]
+                if p % 8 == 7 or p == P - 1:   # L_pp^2 >= min(noise): 8 factors cannot underflow
+                    logdet += 2.0 * np.log(prod)
+                    prod = 1.0
+                quad += r[p * W + lane] ** 2
+            loglik[g * W + lane] += -0.5 * (P * _LOG_2PI + logdet + quad)
+        # mu += G^T r
+        for i in range(d):
+            a0 = vload(mu_g, i * W)
+            for p in range(P):
+                a0 = a0 + vload(G, (p * d + i) * W) * vload(r, p * W)
+            vstore(mu_g, i * W, a0)
+        # Sigma -= G^T G on the lower triangle: three rows of G, rows i and i + 1 of Sigma per
+        # pass (they share the loads of G[:, j]).
         for c in range(0, n_rows, 3):
-            Ga, Gb, Gc = G[c], G[c + 1], G[c + 2]
-            for i in range(d):
-                Si = S[i]
-                ga, gb, gc = Ga[i], Gb[i], Gc[i]
-                for j in range(d):
-                    Si[j] -= ga * Ga[j] + gb * Gb[j] + gc * Gc[j]
+            g0, g1, g2 = c * d * W, (c + 1) * d * W, (c + 2) * d * W
+            i = 0
+            while i < d:
+                a0, a1, a2 = vload(G, g0 + i * W), vload(G, g1 + i * W), vload(G, g2 + i * W)
+                base = i * (i + 1) // 2
+                if i + 1 < d:
+                    e0 = vload(G, g0 + (i + 1) * W)
+                    e1 = vload(G, g1 + (i + 1) * W)
+                    e2 = vload(G, g2 + (i + 1) * W)
+                    for j in range(i + 1):
+                        b0 = vload(G, g0 + j * W)
+                        b1 = vload(G, g1 + j * W)
+                        b2 = vload(G, g2 + j * W)
+                        o = (base + j) * W
+                        vstore(cov_g, o, vload(cov_g, o) - (a0 * b0 + a1 * b1 + a2 * b2))
+                        o += (i + 1) * W                     # entry (i + 1, j)
+                        vstore(cov_g, o, vload(cov_g, o) - (e0 * b0 + e1 * b1 + e2 * b2))
+                    o = (base + 2 * i + 2) * W              # entry (i + 1, i + 1)
+                    vstore(cov_g, o, vload(cov_g, o) - (e0 * e0 + e1 * e1 + e2 * e2))
+                    i += 2
+                else:
+                    for j in range(i + 1):
+                        b0 = vload(G, g0 + j * W)
+                        b1 = vload(G, g1 + j * W)
+                        b2 = vload(G, g2 + j * W)
+                        o = (base + j) * W
+                        vstore(cov_g, o, vload(cov_g, o) - (a0 * b0 + a1 * b1 + a2 * b2))
+                    i += 1
+    # Posterior over the tracked hypotheses (eq. 16 with the mixture weight in the prior).
+    top = -np.inf
+    for c in range(n):
+        top = max(top, log_prior[c] + loglik[c])
+    joint[:] = 0.0
+    total = 0.0
+    for c in range(n):
+        e = np.exp(log_prior[c] + loglik[c] - top)
+        joint[hypothesis[c]] = e
+        total += e
+    smallest = 1.0
+    for c in range(n):
+        joint[hypothesis[c]] /= total
+        smallest = min(smallest, joint[hypothesis[c]])
+    return smallest
+
+
+@numba.njit(cache=True, boundscheck=False)
+def compact_lanes(a, src):
+    """In place: column k of the lane-grouped ``a`` (groups, m W) becomes column src[k]
+    (src increasing, so no column is overwritten before it is moved)."""
+    m = a.shape[1] // W
+    for k in range(src.shape[0]):
+        s = src[k]
+        if s != k:
+            for e in range(m):
+                a[k // W, e * W + k % W] = a[s // W, e * W + s % W]
 
 
 @numba.njit(cache=True, fastmath=False, boundscheck=False)
-def mean_trajectory(W, z, centers, width, alpha):
-    """Mean positions, velocities, accelerations (len(z), n) of the DOFs with weights W (n, N)
+def mean_trajectory(weights, z, centers, width, alpha):
+    """Mean positions, velocities, accelerations (len(z), n) of the DOFs with ``weights`` (n, N)
     at phases z for the phase speed alpha: eqs. 1-3 with GaussianBasis.evaluate's basis and its
     clamping (psi held, derivatives zero outside [0, 1]), in one pass without temporaries."""
-    T, N, n = z.shape[0], centers.shape[0], W.shape[0]
+    T, N, n = z.shape[0], centers.shape[0], weights.shape[0]
     pos = np.zeros((T, n))
     vel = np.zeros((T, n))
     acc = np.zeros((T, n))
@@ -146,11 +386,11 @@ def mean_trajectory(W, z, centers, width, alpha):
         for i in range(N):
             psi = b[i] / s
             for j in range(n):
-                pos[t, j] += psi * W[j, i]
+                pos[t, j] += psi * weights[j, i]
             if inside:
                 dpsi = (db[i] - psi * ds) / s
                 ddpsi = (ddb[i] - 2.0 * dpsi * ds - psi * dds) / s
                 for j in range(n):
-                    vel[t, j] += alpha * dpsi * W[j, i]
-                    acc[t, j] += alpha * alpha * ddpsi * W[j, i]
+                    vel[t, j] += alpha * dpsi * weights[j, i]
+                    acc[t, j] += alpha * alpha * ddpsi * weights[j, i]
     return pos, vel, acc

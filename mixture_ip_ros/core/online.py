@@ -4,7 +4,8 @@ alpha, updated recursively per observation, and the conditioned controlled-agent
 
 Each hypothesis (k, alpha_m) keeps the Gaussian over the observed agent's weights given D and
 its log evidence log p(D | k, alpha_m) (eqs. 17-18), updated in Kalman form in O(P d^2) per
-observation. The basis rows psi(alpha_m t) are computed once per alpha and shared by every
+observation (core/_kalman: hypotheses in groups of SIMD lanes, covariances as packed lower
+triangles). The basis rows psi(alpha_m t) are computed once per alpha and shared by every
 component. The controlled agent is recovered exactly only when asked for: since D depends
 on the observed weights alone, w_c | D follows from w_o | D through B_k = Sigma_co Sigma_oo^-1.
 """
@@ -12,7 +13,8 @@ on the observed weights alone, w_c | D follows from w_o | D through B_k = Sigma_
 import numpy as np
 from scipy import linalg
 
-from ._kalman import basis_rows, kalman_update, mean_trajectory
+from ._kalman import (W, basis_rows, compact_lanes, from_lanes, kalman_update, mean_trajectory,
+                      to_lanes, tri_index)
 from .interaction import trajectory_distribution
 from .phase import alpha_grid, alpha_log_prior
 
@@ -28,10 +30,20 @@ class OnlineEstimator:
     strongly correlated (the residual between a person's path and the model is smooth), so
     feeding 100+ Hz as independent evidence makes the posterior overconfident; 20 Hz is about
     the bandwidth of the residual. ``min_interval=0`` uses every sample.
+
+    ``prune_below``: after each update (and at each :meth:`prune`), hypotheses whose posterior
+    probability is below this are dropped and no longer updated (0, the default: none is, the
+    posterior is exact). The ones kept are exact: their log evidence and posterior weights are
+    those of eqs. 17-18 given every observation absorbed; the posterior is renormalised over
+    them. ``pruned_mass`` sums the probabilities of the dropped ones when they were dropped
+    (each below ``prune_below``). A dropped hypothesis is not revived, so this bounds the mass
+    dropped at each pruning, not what later evidence could have given it. ``absorb`` does not
+    prune, so samples absorbed in any order and then pruned give one result. It must be below
+    1 / (K M), so that the most probable hypothesis is kept.
     """
 
     def __init__(self, model, n_alpha: int = 50, min_interval: float = 0.05,
-                 alpha_range_std: float = 3.0):
+                 alpha_range_std: float = 3.0, prune_below: float = 0.0):
         model._check_fitted()
         self.model = model
         self.min_interval = float(min_interval)
@@ -43,11 +55,22 @@ class OnlineEstimator:
         self._log_prior = (np.log(model.weights_)[:, None]
                            + alpha_log_prior(self.alphas, model.alpha_mean_, model.alpha_std_)
                            ).ravel()
-        self._mu0 = np.repeat(model.means_[:, :do], M, axis=0)
-        self._sigma0 = np.repeat(model.covariances_[:, :do, :do], M, axis=0)
-        self._psi_index = np.tile(np.arange(M), K)
-        # Tied noise (P,) is one vector for every hypothesis; per-component noise is (K, P).
-        self._noise = np.ascontiguousarray(model.observed_noise_var_, dtype=float)
+        if not 0.0 <= prune_below < 1.0 / (K * M):
+            raise ValueError(f'prune_below must be in [0, 1/(K M) = {1.0 / (K * M):.3g}), '
+                             f'got {prune_below}')
+        self.prune_below = float(prune_below)
+        # Column c of the state is hypothesis (k, m) = divmod(c, M) until pruning reorders them;
+        # the columns are padded to whole lane groups with copies of column 0 (never read).
+        self._tri = tri_index(do)
+        lower = np.tril_indices(do)
+        self._hyp0 = np.r_[np.arange(K * M), np.zeros(-(K * M) % W, dtype=int)]
+        self._cov0 = to_lanes(np.repeat(model.covariances_[:, lower[0], lower[1]], M, 0)
+                               [self._hyp0])
+        self._mu0 = to_lanes(np.repeat(model.means_[:, :do], M, 0)[self._hyp0])
+        # Observation noise per column: tied (P,) or per component (K, P).
+        noise = np.broadcast_to(np.asarray(model.observed_noise_var_, dtype=float),
+                                (K, model.n_observed_))
+        self._noise0 = to_lanes(np.repeat(noise, M, 0)[self._hyp0])
         # Regression of controlled on observed weights per component (exact conditioning).
         self._gain, self._cond_cov = [], []
         for k in range(K):
@@ -62,14 +85,22 @@ class OnlineEstimator:
 
     def reset(self):
         """Forget every observation: a new interaction starts (t = 0 at its onset)."""
-        self.mu = self._mu0.copy()
-        self.sigma = self._sigma0.copy()
-        self.log_evidence_flat = np.zeros(len(self._mu0))
+        self._cov = self._cov0.copy()
+        self._mu = self._mu0.copy()
+        self._noise = self._noise0.copy()
+        self._hyp = self._hyp0.copy()                       # hypothesis held in each column
+        self._loglik = np.zeros(len(self._hyp))
+        self._alpha_index = self._hyp % len(self.alphas)    # phase speed of each column
+        self._prior = self._log_prior[self._hyp]            # log prior of each column
+        self._col = np.arange(len(self._log_prior))         # column of each one, -1: pruned
+        self.n_tracked = len(self._col)                     # columns still updated
+        self.pruned_mass = 0.0
         self.n_observations = 0
         self.n_skipped = 0
         self.t_last = None      # time of the last observation used
         self.t_seen = None      # time of the last observation offered (used or skipped)
-        self._joint = None      # p(k, alpha_m | D), computed once per update
+        self._joint = None      # p(k, alpha_m | D), computed with each update
+        self._smallest = 0.0    # smallest p(k, alpha_m | D) of a tracked hypothesis (0: unknown)
 
     def update(self, t: float, y) -> bool:
         """Add the observed agent's position ``y`` (P,) at ``t`` seconds after onset.
@@ -82,6 +113,8 @@ class OnlineEstimator:
         if not self.admit(t):
             return False
         self._absorb(t, y)
+        if self.prune_below > 0.0:
+            self.prune()
         return True
 
     def admit(self, t: float) -> bool:
@@ -109,7 +142,8 @@ class OnlineEstimator:
 
         In any order: the weights do not change over the movement, so the posterior and the
         evidence after a set of observations do not depend on the order they were absorbed in
-        (the planner absorbs the samples held before an onset while live ones come in).
+        (the planner absorbs the samples held before an onset while live ones come in). It does
+        not prune: call :meth:`prune` once the samples held are in.
         """
         y = self._checked(y)
         if not (np.isfinite(t) and t >= 0):
@@ -117,18 +151,43 @@ class OnlineEstimator:
         self._absorb(t, y)
 
     def _absorb(self, t, y):
-        self._joint = None
-        psi = basis_rows(self.alphas * t, self.model.basis_.centers, self.model.basis_.width)
-        if self._noise.ndim == 1:
-            kalman_update(self.sigma, self.mu, self.log_evidence_flat, psi, self._psi_index, y,
-                          self._noise)
-        else:                           # per-component noise: one call per component's block
-            M = len(self.alphas)
-            for k in range(self.n_components):
-                h = slice(k * M, (k + 1) * M)
-                kalman_update(self.sigma[h], self.mu[h], self.log_evidence_flat[h], psi,
-                              self._psi_index[h], y, self._noise[k])
+        joint = np.empty(len(self._col))
+        basis = self.model.basis_
+        self._smallest = kalman_update(self._cov, self._mu, self._loglik, self.n_tracked,
+                                       self._alpha_index, self.alphas, float(t), basis.centers,
+                                       basis.width, y, self._noise, self._prior, self._hyp, joint)
         self.n_observations += 1
+        self._joint = joint.reshape(self.n_components, -1)
+        self._joint.flags.writeable = False
+
+    def prune(self) -> int:
+        """Drop the tracked hypotheses whose posterior is now below ``prune_below`` (update
+        does this after each observation); returns how many. The posterior after absorbing a
+        set of samples in any order and then pruning does not depend on that order.
+        """
+        if self._smallest >= self.prune_below:
+            return 0
+        hyp = self._hyp[:self.n_tracked]
+        joint = self.joint_posterior().ravel().copy()
+        keep = joint[hyp] >= self.prune_below
+        dropped = hyp[~keep]
+        self.pruned_mass += float(joint[dropped].sum())
+        joint[dropped] = 0.0
+        joint /= joint.sum()
+        self._joint = joint.reshape(self.n_components, -1)
+        self._joint.flags.writeable = False
+        self._smallest = joint[hyp[keep]].min()
+        n = int(keep.sum())
+        src = np.flatnonzero(keep)
+        compact_lanes(self._cov, src)
+        compact_lanes(self._mu, src)
+        compact_lanes(self._noise, src)
+        for a in (self._loglik, self._hyp, self._alpha_index, self._prior):
+            a[:n] = a[src]
+        self._col[:] = -1
+        self._col[self._hyp[:n]] = np.arange(n)
+        self.n_tracked = n
+        return len(dropped)
 
     def _checked(self, y) -> np.ndarray:
         y = np.asarray(y, dtype=float)
@@ -140,17 +199,42 @@ class OnlineEstimator:
 
     # ------------------------------------------------------------------ queries
     @property
+    def log_evidence_flat(self):
+        """log p(D | k, alpha_m) of every hypothesis, flat (K M,); -inf where pruned."""
+        out = np.full(len(self._col), -np.inf)
+        n = self.n_tracked
+        out[self._hyp[:n]] = self._loglik[:n]
+        return out
+
+    @property
     def log_evidence(self):
-        """log p(D | k, alpha_m), shape (K, M) (a read-only view)."""
+        """log p(D | k, alpha_m), shape (K, M) (read-only); -inf where pruned."""
         view = self.log_evidence_flat.reshape(self.n_components, -1)
         view.flags.writeable = False
         return view
 
+    @property
+    def mu(self):
+        """Posterior means of the observed weights, (K M, d); NaN where pruned (a copy)."""
+        d = self.n_observed * self.n_basis
+        out = np.full((len(self._col), d), np.nan)
+        n = self.n_tracked
+        out[self._hyp[:n]] = from_lanes(self._mu)[:n]
+        return out
+
+    @property
+    def sigma(self):
+        """Posterior covariances of the observed weights, (K M, d, d); NaN where pruned (a copy)."""
+        d = self.n_observed * self.n_basis
+        out = np.full((len(self._col), d, d), np.nan)
+        n = self.n_tracked
+        out[self._hyp[:n]] = from_lanes(self._cov)[:n][:, self._tri]
+        return out
+
     def joint_posterior(self):
-        """p(k, alpha_m | D), shape (K, M) (read-only)."""
-        if self._joint is None:
-            lp = self._log_prior + self.log_evidence_flat
-            p = np.exp(lp - lp.max())
+        """p(k, alpha_m | D), shape (K, M) (read-only); 0 where pruned."""
+        if self._joint is None:           # no observation yet: the prior
+            p = np.exp(self._log_prior - self._log_prior.max())
             self._joint = (p / p.sum()).reshape(self.n_components, -1)
             self._joint.flags.writeable = False
         return self._joint
@@ -196,9 +280,19 @@ class OnlineEstimator:
         return float(np.clip(self.map_hypothesis()[1] * t, 0.0, 1.0))
 
     def observed_weights(self, k, m):
-        """Posterior N(mean, cov) of the observed agent's weights under hypothesis (k, m)."""
-        h = k * len(self.alphas) + m
-        return self.mu[h], self.sigma[h]
+        """Posterior N(mean, cov) of the observed agent's weights under hypothesis (k, m).
+        Raises ValueError if that hypothesis was pruned."""
+        g, lane = self._lane(k, m)
+        return (self._mu[g].reshape(-1, W)[:, lane].copy(),
+                self._cov[g].reshape(-1, W)[:, lane][self._tri])
+
+    def _lane(self, k, m):
+        """(group, lane) of hypothesis (k, m) in the kernel's state."""
+        c = self._col[k * len(self.alphas) + m]
+        if c < 0:
+            raise ValueError(f'hypothesis (component {k}, alpha {self.alphas[m]:.4g}) was '
+                             f'pruned (posterior below prune_below={self.prune_below:g})')
+        return divmod(c, W)
 
     def predict(self, z_grid, component=None, alpha=None, covariance: bool = True):
         """Conditioned trajectories under (k*, alpha*) (or the given ones) at phases ``z_grid``.
@@ -230,7 +324,8 @@ class OnlineEstimator:
         k, m = self._hypothesis(component, alpha)
         a = float(self.alphas[m])
         basis = self.model.basis_
-        mu_o = self.observed_weights(k, m)[0]
+        g, lane = self._lane(k, m)
+        mu_o = self._mu[g].reshape(-1, W)[:, lane]      # the mean only: no covariance built
         controlled = mean_trajectory(self._controlled_mean(k, mu_o).reshape(-1, self.n_basis),
                                      np.asarray(z_controlled, dtype=float), basis.centers,
                                      basis.width, a)
@@ -253,3 +348,4 @@ class OnlineEstimator:
         dofs = range(self.n_observed, self.n_observed + self.model.n_controlled_)
         out = trajectory_distribution(mean, cov, self.model.basis_, [1.0], 1.0, dofs)
         return out['position'][0], out['position_cov'][0]
+

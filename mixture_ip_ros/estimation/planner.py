@@ -272,7 +272,10 @@ class OnlinePlanner:
         for _ in range(min(len(self._backlog), n or self._settings.backlog_slice)):
             self.estimator.absorb(*self._backlog.popleft())
         self._dirty = True
-        return not self._backlog
+        if self._backlog:
+            return False
+        self.estimator.prune()       # all the evidence is in: the order no longer matters
+        return True
 
     def _take(self, stamp_ns: int, y, defer: bool) -> str:
         """An observation of the current interaction: conditioned on now, or (``defer``)
@@ -287,6 +290,8 @@ class OnlinePlanner:
             used = self.estimator.admit(t)
             if used and not defer:
                 self.estimator.absorb(t, y)
+                if not self._backlog:
+                    self.estimator.prune()
         except ValueError:
             return self._rejected_in_interaction('exception')
         self._t_latest = t

@@ -157,6 +157,7 @@ class BagPlayer(Node):
         self.loops_completed = 0
         self.max_lateness = 0.0  # seconds a message went out after it was due
         self.paused_total = 0.0  # seconds of the pacing clock spent paused during playback
+        self.holding = False     # the playback thread is waiting in a pause
         self._lateness_sum = 0.0
         self.recent_lateness = deque(maxlen=10000)  # per message, seconds (negative = early)
         self.first_sent = self.last_sent = None     # monotonic times of first / last publish
@@ -234,8 +235,10 @@ class BagPlayer(Node):
                     return False
                 if self._paused:
                     began = self._now()
+                    self.holding = True
                     while self._paused and not self._stop:
                         self._cond.wait()
+                    self.holding = False
                     paused = self._now() - began
                     shift[0] += paused
                     self.paused_total += paused

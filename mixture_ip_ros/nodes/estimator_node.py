@@ -71,6 +71,9 @@ class EstimatorParameters:
     observed_frame: str = param(BASE_FRAME, 'frame of the observations; must equal the '
                                             "model's (others are rejected)")
     n_alpha: int = param(50, 'phase-speed hypotheses per component', low=1, high=10_000)
+    prune_below: float = param(0.0, 'hypotheses (component, phase speed) whose posterior falls '
+                                    'below this are no longer updated (faster; a dropped one '
+                                    'never comes back); 0 = exact', low=0.0, high=1.0)
     min_interval: float = param(0.05, 's; observations used at most this often (mocap samples '
                                       'are correlated: more makes the posterior overconfident)',
                                 low=0.0, high=10.0)
@@ -153,7 +156,8 @@ class EstimatorNode(ManagedNode):
                              f"{meta.get('observed_frame')!r}, observations are expected in "
                              f'{p.observed_frame!r} (parameter observed_frame)')
         self.model, self.metadata = model, meta
-        self.estimator = OnlineEstimator(model, n_alpha=p.n_alpha, min_interval=p.min_interval)
+        self.estimator = OnlineEstimator(model, n_alpha=p.n_alpha, min_interval=p.min_interval,
+                                         prune_below=p.prune_below)
         self._warm_up()
         self.planner = OnlinePlanner(self.estimator, self._planner_settings(p),
                                      labels=meta.get('component_labels'),
