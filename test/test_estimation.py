@@ -819,3 +819,48 @@ def test_pruning_waits_for_the_held_samples_and_keeps_the_decision(trained):
     n_all = OnlineEstimator(model).log_evidence_flat.size
     assert all(n == n_all for backlog, n in runs[1e-12][1] if backlog)     # none while held
     assert runs[1e-12][1][-1][1] < n_all                                  # pruned after
+
+
+# -- commit only to movements the model knows --------------------------------------------------
+
+def _run_planner(model, novelty, t, Y, onset=0):
+    planner = OnlinePlanner(OnlineEstimator(model), PlannerSettings(), novelty=novelty)
+    planner.onset(onset)
+    steps = []
+    for ti, y in zip(t, Y):
+        planner.observe(onset + _ns(ti), y)
+        step = planner.replan()
+        if step is not None:
+            steps.append(step)
+    return planner, steps
+
+
+def test_a_reach_commits_as_it_did_and_a_return_to_rest_never(trained):
+    model, meta, held = trained
+    assert model.novelty_ is not None                # calibrated by train_to_file
+    for demo in held:
+        with_gate, steps = _run_planner(model, model.novelty_, demo.t, demo.observed)
+        without, _ = _run_planner(model, None, demo.t, demo.observed)
+        assert with_gate.current.commit_observations == without.current.commit_observations
+        assert with_gate.current.commit_phase == without.current.commit_phase
+        assert not any(s.unexplained for s in steps)
+        back, steps = _run_planner(model, model.novelty_, demo.t, demo.observed[::-1])
+        assert not any(s.send for s in steps) and back.counts.plans_sent == 0
+        assert steps[-1].unexplained and back.current.unexplained
+        plain, _ = _run_planner(model, None, demo.t, demo.observed[::-1])
+        assert plain.counts.plans_sent > 0               # what the gate prevents
+
+
+def test_a_committed_robot_holds_when_the_movement_stops_being_explained(trained):
+    """A second reach from where the first ended, without a rest: after the commit the movement
+    becomes unexplained; the planner says hold once and the interaction ends there."""
+    model, meta, held = trained
+    first, second = held[1], held[0]
+    t = np.concatenate([first.t, first.t[-1] + 0.01 + second.t])
+    Y = np.vstack([first.observed, second.observed - second.observed[0] + first.observed[-1]])
+    planner, steps = _run_planner(model, model.novelty_, t, Y)
+    holds = [s for s in steps if s.hold]
+    assert len(holds) == 1 and not holds[0].send
+    assert planner.counts.holds == 1 and planner.current.end_reason == 'unexplained'
+    assert planner.current.committed and planner.state == 'done'
+    assert planner.current.end_elapsed > first.duration   # after the first reach was done

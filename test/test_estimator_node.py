@@ -476,7 +476,7 @@ def test_refuses_to_configure_without_a_usable_model(harness, trained, tmp_path)
     _refusal(harness, 'does not exist', model_path=str(tmp_path / 'missing.npz'))
     corrupt = tmp_path / 'corrupt.npz'
     corrupt.write_bytes(b'PK\x03\x04 this is not a model')
-    _refusal(harness, f'{corrupt}.*not a readable', model_path=str(corrupt))
+    _refusal(harness, f'{corrupt}: not a model file', model_path=str(corrupt))
     _refusal(harness, 'controlled_names .* do not match', model_path=str(model_path),
              joint_names=[f'lbr_joint_{i}' for i in range(1, 8)])
     _refusal(harness, "frame 'iiwa_link_0'.*'world'", model_path=str(model_path),

@@ -48,8 +48,11 @@ def test_round_trip_predicts_identically(tmp_path, fitted):
 
 
 @pytest.mark.parametrize('change, message', [
-    (lambda p: p.write_bytes(b'not a zip'), 'not a readable'),
-    (lambda p: p.write_bytes(p.read_bytes()[:200]), 'not a readable'),
+    (lambda p: p.write_bytes(b'not a zip'), 'not a model file: not an .npz archive'),
+    (lambda p: p.write_text('model = 42\n'), 'not a model file: not an .npz archive'),
+    (lambda p: p.write_bytes(p.read_bytes()[:200]), 'not an .npz archive'),
+    (lambda p: _huge_header(p), 'declares 8000000000000 bytes of data but holds'),
+    (lambda p: _pickled(p), 'holds Python objects'),
     (lambda p: _rewrite(p, means=np.full((3, 56), np.nan)), 'NaN'),
     (lambda p: _rewrite(p, weights=np.array([0.5, 0.6, -0.1])), 'probability'),
     (lambda p: _rewrite(p, means=np.zeros((3, 10))), 'shape'),
@@ -82,7 +85,7 @@ def test_a_pickled_array_is_refused(tmp_path, fitted):
     with open(path, 'wb') as f:
         np.savez(f, **data)
     assert zipfile.is_zipfile(path)
-    with pytest.raises(ModelFileError, match='not a readable'):
+    with pytest.raises(ModelFileError, match='weights.npy: holds Python objects'):
         load_model(path)
 
 
@@ -114,3 +117,38 @@ def test_a_format_1_file_loads_with_metre_and_radian_units(tmp_path, fitted):
     model, meta = load_model(path, observed_names=OBS, controlled_names=CTRL)
     assert meta['observed_units'] == ['m'] * 3 and meta['controlled_units'] == ['rad'] * 4
     assert model.observation_noise == 0.01 and model.noise == 'tied'
+
+
+def _huge_header(path):
+    """An .npz whose array header declares 1e12 floats (a corrupt or hostile file)."""
+    import io
+    import zipfile
+    b = io.BytesIO()
+    np.lib.format.write_array_header_1_0(b, {'descr': '<f8', 'fortran_order': False,
+                                            'shape': (10**12,)})
+    with zipfile.ZipFile(path, 'w') as z:
+        z.writestr('weights.npy', b.getvalue() + bytes(64))
+
+
+def _pickled(path):
+    import io
+    import zipfile
+    b = io.BytesIO()
+    np.save(b, np.array([{'a': 1}], dtype=object), allow_pickle=True)
+    with zipfile.ZipFile(path, 'w') as z:
+        z.writestr('weights.npy', b.getvalue())
+
+
+def test_a_failed_save_leaves_the_previous_model_whole(tmp_path, fitted, monkeypatch):
+    path = save_model(tmp_path / 'm.npz', fitted[0], observed_names=OBS, controlled_names=CTRL)
+    before = path.read_bytes()
+
+    def disk_full(f, **arrays):
+        f.write(b'PK\x03\x04 half a model')
+        raise OSError(28, 'No space left on device')
+    monkeypatch.setattr(np, 'savez', disk_full)
+    with pytest.raises(OSError, match='No space left'):
+        save_model(path, fitted[0], observed_names=OBS, controlled_names=CTRL)
+    assert path.read_bytes() == before
+    assert [f.name for f in tmp_path.iterdir()] == ['m.npz']         # no temporary left
+    load_model(path)

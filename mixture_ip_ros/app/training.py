@@ -11,6 +11,7 @@ by the held-out log-likelihood otherwise; both curves, the choice and whether th
 has a clear optimum go into the training summary.
 """
 
+import inspect
 import logging
 import sys
 from pathlib import Path
@@ -20,6 +21,7 @@ import numpy as np
 from mixture_ip_ros.core.demonstration import Layout
 from mixture_ip_ros.core.mixture import (MixtureIProMP, heldout_loglik_by_components,
                                          loo_rms_by_components, selection_curve)
+from mixture_ip_ros.core.novelty import calibrate as calibrate_novelty
 from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE, bag_layout
 from mixture_ip_ros.io.model_file import save_model
 
@@ -138,6 +140,12 @@ def component_labels(model, demos):
     return out
 
 
+def _model_params(kwargs) -> dict:
+    """The MixtureIProMP configuration among ``train``'s keyword arguments."""
+    names = inspect.signature(MixtureIProMP).parameters
+    return {k: v for k, v in kwargs.items() if k in names and k != 'n_components'}
+
+
 def default_layout(demos) -> Layout:
     """The wrist (3, m) + robot joints (rad) layout of bag demonstrations; any other layout
     must be named (a model file records every DOF's name and unit)."""
@@ -152,14 +160,23 @@ def default_layout(demos) -> Layout:
 
 def train_to_file(demos, out_path, layout: Layout = None, observed_frame: str = 'iiwa_link_0',
                   **kwargs):
-    """:func:`train`, then save the model with the layout's names and units (default: the
-    bag layout, for 3 + 7 DOFs) and the training summary. A wrist in metres (the bag layout's
+    """:func:`train`, calibrate its novelty test (core.novelty: the evidence of held-out
+    demonstrations, for an unsupervised model), then save the model with the layout's names
+    and units (default: the bag layout, for 3 + 7 DOFs) and the training summary. A wrist in metres (the bag layout's
     observed agent) gets the wrist's observation noise unless ``observation_noise`` is given."""
     demos = list(demos)
     layout = (layout or default_layout(demos)).check(demos)
     if layout.observed == bag_layout().observed and layout.observed_units == ('m',) * 3:
         kwargs.setdefault('observation_noise', WRIST_OBSERVATION_NOISE)
     model, info = train(demos, **kwargs)
+    if kwargs.get('labels') is None:
+        # Held-out folds fitted by regression, as the K curves: EM would take minutes.
+        params = {**_model_params(kwargs), 'method': 'regression'}
+        model.novelty_ = calibrate_novelty(
+            demos, lambda part: MixtureIProMP(n_components=model.n_components,
+                                              **params).fit(part))
+        info['novelty'] = {'prefix': model.novelty_.prefix.round(3).tolist(),
+                           'window': round(model.novelty_.window, 3)}
     save_model(Path(out_path), model, layout=layout, observed_frame=observed_frame,
                component_labels=component_labels(model, demos), extra={'training': info})
     return model, info

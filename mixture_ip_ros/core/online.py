@@ -12,6 +12,7 @@ on the observed weights alone, w_c | D follows from w_o | D through B_k = Sigma_
 
 import numpy as np
 from scipy import linalg
+from scipy.special import logsumexp
 
 from ._kalman import (W, basis_rows, compact_lanes, from_lanes, kalman_update, mean_trajectory,
                       to_lanes, tri_index)
@@ -238,6 +239,13 @@ class OnlineEstimator:
             self._joint = (p / p.sum()).reshape(self.n_components, -1)
             self._joint.flags.writeable = False
         return self._joint
+
+    def log_marginal(self) -> float:
+        """log p(D) = log sum_(k, m) p(k, alpha_m) p(D | k, alpha_m) (eqs. 16-18): how well the
+        model as a whole explains the observations (core.novelty). Over the tracked hypotheses:
+        with pruning it is low by at most the log of 1 - ``pruned_mass``."""
+        n = self.n_tracked
+        return float(logsumexp(self._prior[:n] + self._loglik[:n]))
 
     def component_posterior(self):
         """p(k | D) (eq. 11 with the phase marginalised)."""

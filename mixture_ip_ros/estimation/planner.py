@@ -16,8 +16,10 @@ never waits behind the whole backlog. The robot is committed only once the backl
 on all the evidence, as if every sample had been conditioned on when it came.
 
 Commit (:func:`should_commit`): the first plan is sent once p(k* | D) >= ``confidence_threshold``
-with at least ``min_observations`` observations used; afterwards every replan is sent, also when
-k* changes (the controller blends from its current state into the new plan).
+with at least ``min_observations`` observations used and, given calibrated novelty thresholds
+(core.novelty), the model explains the movement; afterwards every replan is sent, also when k*
+changes (the controller blends from its current state into the new plan), until the movement
+stops being explained: then the robot holds and the interaction ends ('unexplained').
 """
 
 from collections import deque
@@ -26,6 +28,7 @@ from typing import Optional
 
 import numpy as np
 
+from mixture_ip_ros.core.novelty import NoveltyMonitor, NoveltyThresholds
 from mixture_ip_ros.estimation.held import HeldSamples
 from mixture_ip_ros.estimation.plans import (JointLimits, Plan, PosteriorSummary, build_plan,
                                              check_plan, posterior_summary, within_limits)
@@ -87,7 +90,8 @@ class PlannerSettings:
 class Step:
     """What one replan produced: always the posterior summary and the plan (its hypothesis is
     the one of the predicted path); ``send`` says whether the joint trajectory goes out;
-    ``problem`` is check_plan's reason not to publish. ``trigger_ns``: the stamp of the latest
+    ``problem`` why the plan may not be published; ``unexplained`` why the movement is none the
+    model knows (no commit; once committed, ``hold``: the robot must stop where it is). ``trigger_ns``: the stamp of the latest
     evidence the plan rests on (the observation or the 'end' event that brought it)."""
 
     summary: PosteriorSummary
@@ -97,6 +101,8 @@ class Step:
     committed_now: bool = False
     switched_from: Optional[int] = None
     problem: Optional[str] = None
+    unexplained: Optional[str] = None   # why the model does not explain the movement
+    hold: bool = False                  # stop the robot where it is (the movement is unexplained)
 
 
 class OnlinePlanner:
@@ -109,7 +115,8 @@ class OnlinePlanner:
     """
 
     def __init__(self, estimator, settings: PlannerSettings = PlannerSettings(), *,
-                 labels=None, catch_up_velocity=None, limits: Optional[JointLimits] = None):
+                 labels=None, catch_up_velocity=None, limits: Optional[JointLimits] = None,
+                 novelty: Optional[NoveltyThresholds] = None):
         if labels is not None and len(labels) != estimator.n_components:
             raise ValueError(f'{len(labels)} component labels for {estimator.n_components} '
                              'components')
@@ -118,6 +125,8 @@ class OnlinePlanner:
         self.catch_up_velocity = (None if catch_up_velocity is None
                                   else np.asarray(catch_up_velocity, dtype=float))
         self.limits = limits      # JointLimits: no plan beyond them is ever sent
+        # Commit only to movements the model explains (core.novelty); None: on confidence alone.
+        self._novelty = None if novelty is None else NoveltyMonitor(novelty)
         self.robot_q = None       # latest robot joints (set by the node), for catching up
         self.state = 'idle'
         self.interactions = []
@@ -196,6 +205,8 @@ class OnlinePlanner:
         if self.active:
             self._close('new_onset', None)
         self.estimator.reset()
+        if self._novelty is not None:
+            self._novelty.reset()
         self._schedule.restart()
         self._onset_ns = int(stamp_ns)
         self._t_latest = self._y_latest = None
@@ -271,6 +282,7 @@ class OnlinePlanner:
             return False
         for _ in range(min(len(self._backlog), n or self._settings.backlog_slice)):
             self.estimator.absorb(*self._backlog.popleft())
+        self._record_evidence()
         self._dirty = True
         if self._backlog:
             return False
@@ -290,6 +302,7 @@ class OnlinePlanner:
             used = self.estimator.admit(t)
             if used and not defer:
                 self.estimator.absorb(t, y)
+                self._record_evidence()
                 if not self._backlog:
                     self.estimator.prune()
         except ValueError:
@@ -307,6 +320,10 @@ class OnlinePlanner:
         self.counts.skipped += 1
         rec.n_skipped += 1
         return 'skipped'
+
+    def _record_evidence(self):
+        if self._novelty is not None:
+            self._novelty.record(self.estimator.n_observations, self.estimator.log_marginal())
 
     def _rejected_in_interaction(self, reason):
         if self.active:
@@ -349,15 +366,27 @@ class OnlinePlanner:
         if problem is not None:
             return Step(summary, plan, send=False, trigger_ns=trigger, problem=problem)
         plan = sendable
+        unexplained = None if self._novelty is None else self._novelty.unexplained()
+        if unexplained is not None:
+            rec.unexplained = unexplained
         committed_now = False
         if self.state == 'observing':
-            if self._backlog or not should_commit(summary.probabilities, est.n_observations,
-                                                  s.confidence_threshold, s.min_observations):
-                return Step(summary, plan, send=False, trigger_ns=trigger)
+            if (self._backlog or unexplained is not None
+                    or not should_commit(summary.probabilities, est.n_observations,
+                                         s.confidence_threshold, s.min_observations)):
+                return Step(summary, plan, send=False, trigger_ns=trigger,
+                            unexplained=unexplained)
             committed_now = True
             self.state = rec.state = 'committed'
             rec.commit_phase, rec.commit_elapsed = summary.phase, t_now
             rec.commit_component, rec.commit_observations = k, est.n_observations
+        elif unexplained is not None:
+            # Committed, and what the person does now is no movement the model knows: the robot
+            # stops where it is; this interaction gets no more plans.
+            self.counts.holds += 1
+            self._close('unexplained', t_now)
+            return Step(summary, plan, send=False, trigger_ns=trigger, hold=True,
+                        unexplained=unexplained)
         switched_from = None
         if self._sent_component is not None and k != self._sent_component:
             switched_from = self._sent_component

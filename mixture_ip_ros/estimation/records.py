@@ -38,7 +38,9 @@ class Interaction:
     of the latest replan; ``final_*`` are set when the interaction closes. ``commit_phase`` is
     the phase at the first plan sent, i.e. the fraction of the human movement seen (None if the
     robot never moved). ``end_reason`` is 'end' (the observer's event), 'new_onset' (another
-    interaction started first) or 'deactivated' (the node stopped); None while it runs.
+    interaction started first), 'deactivated' (the node stopped) or 'unexplained' (the movement
+    stopped being one the model knows after the robot was committed: it holds); None while it
+    runs.
     """
 
     onset_stamp_ns: int
@@ -63,6 +65,7 @@ class Interaction:
     gaps: int = 0
     end_reason: Optional[str] = None
     end_elapsed: Optional[float] = None
+    unexplained: Optional[str] = None   # the latest reason the model did not explain it
 
     @property
     def onset_time(self) -> float:
@@ -92,6 +95,7 @@ class ObservationCounts:
     plans_sent: int = 0
     plan_refusals: dict = field(default_factory=lambda: dict.fromkeys(PLAN_REFUSALS, 0))
     plans_time_scaled: int = 0          # slowed down to respect the joint limits, then sent
+    holds: int = 0                      # committed interactions stopped: unexplained movement
 
     @property
     def n_rejected(self) -> int:

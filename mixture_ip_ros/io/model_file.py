@@ -20,6 +20,8 @@ from mixture_ip_ros import __version__
 from mixture_ip_ros.core.basis import GaussianBasis
 from mixture_ip_ros.core.demonstration import Layout
 from mixture_ip_ros.core.mixture import MixtureIProMP
+from mixture_ip_ros.core.novelty import NoveltyThresholds
+from mixture_ip_ros.io.files import write_atomic
 
 FORMAT = 'mixture_ip_ros/mixture-iprompt'
 FORMAT_VERSION = 2
@@ -46,8 +48,10 @@ def _jsonable_param(v):
 def save_model(path, model: MixtureIProMP, *, layout: Layout = None, observed_names=None,
                controlled_names=None, observed_units=None, controlled_units=None,
                observed_frame='iiwa_link_0', component_labels=None, extra=None):
-    """Write ``model`` to ``path`` (.npz). The DOF names (and units) consumers check against
-    come from ``layout`` or from the name/unit lists (units default to '' = unspecified)."""
+    """Write ``model`` to ``path`` (.npz), atomically (io.files). The DOF names (and units)
+    consumers check against come from ``layout`` or from the name/unit lists (units default
+    to '' = unspecified). The model's ``novelty_`` thresholds (core.novelty, calibrated at
+    training) are kept when it has them."""
     model._check_fitted()
     if layout is None:
         if observed_names is None or controlled_names is None:
@@ -70,14 +74,16 @@ def save_model(path, model: MixtureIProMP, *, layout: Layout = None, observed_na
                     else [_jsonable_param(c) for c in model.classes_]),
         'component_labels': list(component_labels) if component_labels is not None else None,
         'log_likelihood': [float(v) for v in model.log_likelihood_],
+        'novelty': None if (novelty := getattr(model, 'novelty_', None)) is None else {
+            'prefix': [float(v) for v in novelty.prefix], 'window': float(novelty.window),
+            'window_size': novelty.window_size, 'min_interval': novelty.min_interval},
         'extra': extra or {},
     }
     arrays = {name: np.asarray(getattr(model, name + '_'), dtype=float) for name in _ARRAYS}
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, 'wb') as f:
-        np.savez(f, metadata=np.array(json.dumps(meta)), **arrays)
-    return path
+    return write_atomic(path, lambda f: np.savez(f, metadata=np.array(json.dumps(meta)),
+                                                 **arrays))
 
 
 def load_model(path, *, observed_names=None, controlled_names=None):
@@ -91,6 +97,9 @@ def load_model(path, *, observed_names=None, controlled_names=None):
         raise ModelFileError(f'model file {path}: {msg}')
     if not path.is_file():
         fail('does not exist')
+    problem = _npz_problem(path)
+    if problem:
+        fail(problem)
     try:
         with np.load(path, allow_pickle=False) as npz:
             data = {k: npz[k] for k in npz.files}
@@ -158,7 +167,52 @@ def load_model(path, *, observed_names=None, controlled_names=None):
         setattr(model, name + '_', data[name])
     model.log_likelihood_ = meta.get('log_likelihood', [])
     model.classes_ = meta.get('classes')
+    try:
+        model.novelty_ = novelty_thresholds(meta)
+    except (KeyError, TypeError, ValueError) as e:
+        fail(f'invalid novelty thresholds ({e})')
     return model, meta
+
+
+def novelty_thresholds(meta):
+    """The calibrated novelty thresholds in a model file's metadata, or None (a model trained
+    before they existed)."""
+    n = meta.get('novelty')
+    if n is None:
+        return None
+    return NoveltyThresholds(np.asarray(n['prefix'], dtype=float), float(n['window']),
+                             int(n['window_size']), float(n['min_interval']))
+
+
+MAX_ARRAY_BYTES = 2**30   # no model is near this; a header declaring more is corrupt
+
+
+def _npz_problem(path):
+    """Why ``path`` cannot be a model's .npz, read from its headers before anything is
+    allocated (a corrupt header must not make numpy reserve terabytes), or None."""
+    try:
+        archive = zipfile.ZipFile(path)
+    except (zipfile.BadZipFile, OSError):
+        return 'not a model file: not an .npz archive (write one with mixture-ip train)'
+    with archive:
+        for info in archive.infolist():
+            if not info.filename.endswith('.npy'):
+                return f'unexpected member {info.filename!r} (not an .npz of arrays)'
+            try:
+                with archive.open(info) as f:
+                    version = np.lib.format.read_magic(f)
+                    read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                                   else np.lib.format.read_array_header_2_0)
+                    shape, _, dtype = read_header(f)
+            except Exception as e:    # numpy raises several types on a corrupt header
+                return f'{info.filename}: unreadable array header ({e})'
+            if dtype.hasobject:
+                return f'{info.filename}: holds Python objects (a pickle), refused'
+            nbytes = int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
+            if nbytes > MAX_ARRAY_BYTES or nbytes > info.file_size:
+                return (f'{info.filename}: declares {nbytes} bytes of data but holds '
+                        f'{info.file_size} (truncated or corrupt)')
+    return None
 
 
 def model_layout(meta) -> Layout:

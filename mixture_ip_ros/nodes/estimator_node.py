@@ -159,9 +159,20 @@ class EstimatorNode(ManagedNode):
         self.estimator = OnlineEstimator(model, n_alpha=p.n_alpha, min_interval=p.min_interval,
                                          prune_below=p.prune_below)
         self._warm_up()
+        novelty = getattr(model, 'novelty_', None)
+        if novelty is None:
+            self.get_logger().warning(
+                f'model file {p.model_path} has no novelty thresholds (trained before they '
+                'existed): the robot commits on confidence alone, also to movements the model '
+                'never learned. Train it again with mixture-ip train.')
+        elif abs(novelty.min_interval - p.min_interval) > 1e-9:
+            self.get_logger().warning(
+                f'the novelty thresholds were calibrated with min_interval '
+                f'{novelty.min_interval} s, this node uses {p.min_interval} s: they may refuse '
+                'movements the model knows, or accept others')
         self.planner = OnlinePlanner(self.estimator, self._planner_settings(p),
                                      labels=meta.get('component_labels'),
-                                     catch_up_velocity=p.catch_up_velocity)
+                                     catch_up_velocity=p.catch_up_velocity, novelty=novelty)
         self._summary_labels = ','.join(PosteriorSummary.labels(model.n_components))
         self._trajectory_encoder = JointTrajectoryEncoder(p.joint_names)
         self._path_encoder = PathEncoder(p.observed_frame)
@@ -347,6 +358,13 @@ class EstimatorNode(ManagedNode):
         about), then the posterior, the predicted path and the markers."""
         if step is None:
             return
+        if step.hold:
+            self._traj_pub.publish(JointTrajectory(joint_names=list(self.params.joint_names)))
+            self.get_logger().warning(f'the movement is none the model knows any more '
+                                      f'({step.unexplained}): the robot holds')
+        elif step.unexplained is not None:
+            self.get_logger().info(f'not committing: {step.unexplained}',
+                                   throttle_duration_sec=self.params.log_throttle_sec)
         onset_ns = self.planner.onset_ns
         plan = step.plan if step.problem is None else None
         if plan is not None and step.send:
@@ -443,6 +461,8 @@ class EstimatorNode(ManagedNode):
             'plan_latency_mean_us': round(self.plan_latency.mean_us, 1),
             'plan_latency_max_us': round(self.plan_latency.max_us, 1),
             'plans_sent': counts.plans_sent,
+            'holds_unexplained': counts.holds,
+            'unexplained': rec and rec.unexplained,
             'plans_time_scaled': counts.plans_time_scaled,
             **{f'plans_refused_{k}': v for k, v in counts.plan_refusals.items()},
             'events_unknown': self.events['unknown'],

@@ -1,0 +1,159 @@
+"""Is the observed movement one the model knows? A calibrated "none of these" test.
+
+A confident p(k* | D) says one component explains the observations better than the others, not
+that any explains them: a person returning the hand to rest, or starting a second reach without
+resting, is confidently assigned to some component. The model's own evidence says more: the
+log marginal likelihood of the observations, log p(D_1:n) = log sum_(k, m) p(k, alpha_m)
+p(D_1:n | k, alpha_m) (eqs. 16-18), is high for movements like the training ones and collapses
+for others. Two statistics, per observation used (so they do not grow with n):
+
+- the whole interaction so far, log p(D_1:n) / n;
+- the latest ``window`` observations, (log p(D_1:n) - log p(D_1:n-window)) / window: the log
+  predictive density of what was just seen, which falls as soon as the movement stops being
+  explained (the second reach of two without a rest, an unseen movement after a good start).
+
+Their thresholds are calibrated on training demonstrations held out of the model (cross
+validation), fed through the online estimator exactly as the node feeds it (the same alpha grid
+and decimation): the lowest value any held-out demonstration reached, lowered by a margin of
+the spread between that lowest and the median value, so that a new person's reach, a little
+further from the training set than held-out ones, is still explained. The prefix threshold is
+per number of observations (it starts noisy and settles). Movements it refuses (returns to rest,
+transitions between reaches) are tested in the test suite and measured by bench/soak.py.
+"""
+
+from collections import deque
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+WINDOW = 5           # observations: 0.25 s at the node's 20 Hz
+MAX_PREFIX = 40      # per-n prefix thresholds up to here, then one for every larger n
+
+
+@dataclass(frozen=True)
+class NoveltyThresholds:
+    """``prefix[n - 1]``: the lowest acceptable log p(D_1:n) / n for n observations (the last
+    entry for every larger n); ``window``: the lowest acceptable mean of the latest
+    ``window_size`` observations' log predictive densities; ``min_interval``: the decimation it
+    was calibrated with (s)."""
+
+    prefix: np.ndarray
+    window: float
+    window_size: int = WINDOW
+    min_interval: float = 0.05
+
+    def __post_init__(self):
+        prefix = np.asarray(self.prefix, dtype=float)
+        if prefix.ndim != 1 or prefix.size < 1 or not np.all(np.isfinite(prefix)):
+            raise ValueError('novelty prefix thresholds must be a non-empty finite 1-D array')
+        if not np.isfinite(self.window):
+            raise ValueError('the novelty window threshold must be finite')
+        if int(self.window_size) != self.window_size or self.window_size < 1:
+            raise ValueError(f'window_size must be an integer >= 1, got {self.window_size}')
+        object.__setattr__(self, 'prefix', prefix)
+        object.__setattr__(self, 'window_size', int(self.window_size))
+
+    def prefix_threshold(self, n: int) -> float:
+        return float(self.prefix[min(n, self.prefix.size) - 1])
+
+
+class NoveltyMonitor:
+    """Follows log p(D_1:n) of one interaction and says whether the model explains it."""
+
+    def __init__(self, thresholds: NoveltyThresholds):
+        self.thresholds = thresholds
+        self._history = deque(maxlen=thresholds.window_size + 1)   # (n, log p(D_1:n))
+
+    def reset(self) -> None:
+        self._history.clear()
+
+    def record(self, n: int, log_marginal: float) -> None:
+        """log p(D_1:n) after the n-th observation used (in time order, every one)."""
+        if self._history and n <= self._history[-1][0]:
+            self._history.clear()          # a new interaction, or its samples re-absorbed
+        self._history.append((int(n), float(log_marginal)))
+
+    def statistics(self):
+        """(prefix, window) statistics of the latest record (window None until there are
+        ``window_size`` observations after the first recorded one)."""
+        if not self._history:
+            return None, None
+        n, lm = self._history[-1]
+        prefix = lm / n
+        n0, lm0 = self._history[0]
+        window = (lm - lm0) / (n - n0) if n - n0 >= self.thresholds.window_size else None
+        return prefix, window
+
+    def unexplained(self) -> Optional[str]:
+        """Why the observations so far are not explained by the model, or None."""
+        prefix, window = self.statistics()
+        if prefix is None:
+            return None
+        n = self._history[-1][0]
+        low = self.thresholds.prefix_threshold(n)
+        if prefix < low:
+            return (f'log p(D)/n = {prefix:.3g} below {low:.3g}, the lowest of held-out '
+                    f'training movements after {n} observations')
+        if window is not None and window < self.thresholds.window:
+            return (f'the latest {self.thresholds.window_size} observations have log '
+                    f'p = {window:.3g} each, below {self.thresholds.window:.3g}')
+        return None
+
+
+def held_out_statistics(model, demos, *, n_alpha: int, min_interval: float,
+                        window_size: int = WINDOW):
+    """Prefix statistics per n (list of arrays over demonstrations, n = 1..) and every window
+    statistic, of ``demos`` fed through an OnlineEstimator of ``model`` (the online way)."""
+    from mixture_ip_ros.core.online import OnlineEstimator
+    prefix, windows = {}, []
+    for demo in demos:
+        est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval)
+        monitor = NoveltyMonitor(NoveltyThresholds(np.zeros(1), 0.0, window_size, min_interval))
+        ok = ~np.isnan(demo.observed).any(axis=1)
+        for t, y in zip(demo.t[ok], demo.observed[ok]):
+            if est.update(float(t), y):
+                monitor.record(est.n_observations, est.log_marginal())
+                p, w = monitor.statistics()
+                prefix.setdefault(est.n_observations, []).append(p)
+                if w is not None:
+                    windows.append(w)
+    return [np.array(prefix[n]) for n in sorted(prefix)], np.array(windows)
+
+
+def _threshold(values) -> float:
+    """The lowest value, lowered by the spread between it and the median."""
+    values = np.asarray(values, dtype=float)
+    low = float(values.min())
+    return low - (float(np.median(values)) - low)
+
+
+def calibrate(demos, fit, *, n_alpha: int = 50, min_interval: float = 0.05, n_folds: int = 5,
+              window_size: int = WINDOW, random_state=0) -> NoveltyThresholds:
+    """Thresholds from ``demos`` held out in ``n_folds`` folds; ``fit(train)`` returns a fitted
+    MixtureIProMP (the same configuration as the model they will guard)."""
+    from mixture_ip_ros.core.mixture import cv_folds
+    demos = list(demos)
+    if len(demos) < 2:
+        raise ValueError('novelty calibration needs at least 2 demonstrations')
+    folds = cv_folds(len(demos), min(n_folds, len(demos)), random_state)
+    prefix, windows = {}, []
+    for f in range(folds.max() + 1):
+        train = [d for d, g in zip(demos, folds) if g != f]
+        test = [d for d, g in zip(demos, folds) if g == f]
+        by_n, w = held_out_statistics(fit(train), test, n_alpha=n_alpha,
+                                      min_interval=min_interval, window_size=window_size)
+        for n, values in enumerate(by_n, start=1):
+            prefix.setdefault(n, []).extend(values)
+        windows.extend(w)
+    ns = sorted(prefix)
+    # Beyond MAX_PREFIX (or where few demonstrations are that long) one threshold for all.
+    last = [v for n in ns if n >= MAX_PREFIX for v in prefix[n]]
+    per_n = [_threshold(prefix[n]) for n in ns if n < MAX_PREFIX]
+    if last:
+        per_n.append(_threshold(last))
+    window = _threshold(windows) if len(windows) else -np.inf
+    if not np.isfinite(window):
+        raise ValueError('novelty calibration: no demonstration is long enough for a window of '
+                         f'{window_size} observations')
+    return NoveltyThresholds(np.array(per_n), window, window_size, min_interval)

@@ -1,0 +1,95 @@
+"""The "none of these" test (core.novelty): calibrated on held-out training demonstrations, it
+explains new movements of the learned patterns and refuses the others (returns to rest, an
+unseen pattern, a second reach without a rest)."""
+
+import numpy as np
+import pytest
+
+from mixture_ip_ros.core.mixture import MixtureIProMP
+from mixture_ip_ros.core.novelty import NoveltyMonitor, NoveltyThresholds, calibrate
+from mixture_ip_ros.core.online import OnlineEstimator
+from mixture_ip_ros.scenarios.synthetic import mixture_demos
+
+
+def _fit(demos):
+    return MixtureIProMP(len({d.label for d in demos}), n_basis=8,
+                         observation_noise=0.005).fit(demos)
+
+
+@pytest.fixture(scope='module')
+def patterns():
+    demos = mixture_demos(seed=0, n_obs=3, n_ctrl=2, n_basis=8)[0]
+    test = demos[::3]                              # a third never seen in training
+    train = [d for i, d in enumerate(demos) if i % 3]
+    return train, test, calibrate(train, _fit), _fit(train)
+
+
+def _first_flag(model, thresholds, t, Y):
+    """The number of observations after which the monitor first refuses the stream (None)."""
+    est = OnlineEstimator(model)
+    monitor = NoveltyMonitor(thresholds)
+    for ti, y in zip(t, Y):
+        if est.update(float(ti), y):
+            monitor.record(est.n_observations, est.log_marginal())
+            if monitor.unexplained():
+                return est.n_observations
+    return None
+
+
+def test_new_movements_of_the_learned_patterns_are_explained(patterns):
+    train, test, thresholds, model = patterns
+    assert [_first_flag(model, thresholds, d.t, d.observed) for d in test] == [None] * len(test)
+
+
+def test_a_return_to_rest_is_refused_within_three_observations(patterns):
+    _, test, thresholds, model = patterns
+    flags = [_first_flag(model, thresholds, d.t, d.observed[::-1]) for d in test]
+    assert all(f is not None and f <= 3 for f in flags), flags
+
+
+def test_a_pattern_never_learned_is_refused():
+    demos = mixture_demos(seed=0, n_obs=3, n_ctrl=2, n_basis=8)[0]
+    known = [d for d in demos if d.label != '2']
+    thresholds, model = calibrate(known, _fit), _fit(known)
+    flags = [_first_flag(model, thresholds, d.t, d.observed) for d in demos if d.label == '2']
+    assert all(f is not None and f <= 5 for f in flags), flags
+
+
+def test_a_second_reach_without_a_rest_is_refused_soon_after_it_starts(patterns):
+    """A movement explained to its end, then another pattern's from where it ended: the
+    latest observations stop being explained within a window of the change."""
+    _, test, thresholds, model = patterns
+    first = next(d for d in test if d.label == '0')
+    second = next(d for d in test if d.label == '1')
+    t = np.concatenate([first.t, first.t[-1] + 0.01 + second.t])
+    Y = np.vstack([first.observed, second.observed - second.observed[0] + first.observed[-1]])
+    n_first = int(np.floor(first.duration / 0.05)) + 1            # observations at 20 Hz
+    flag = _first_flag(model, thresholds, t, Y)
+    assert flag is not None and n_first < flag <= n_first + 2 * thresholds.window_size
+
+
+def test_thresholds_are_validated_and_read_per_number_of_observations():
+    th = NoveltyThresholds(np.array([1.0, 2.0, 3.0]), 0.5)
+    assert [th.prefix_threshold(n) for n in (1, 3, 40)] == [1.0, 3.0, 3.0]
+    for bad in ({'prefix': np.array([])}, {'prefix': np.array([np.nan])},
+                {'window': np.inf}, {'window_size': 0}):
+        with pytest.raises(ValueError):
+            NoveltyThresholds(**{'prefix': np.ones(2), 'window': 0.0, **bad})
+
+
+def test_calibration_bounds_every_held_out_statistic_with_a_margin(patterns):
+    """By construction each threshold is below every held-out value by the spread between the
+    lowest and the median: recomputed here from the same folds."""
+    from mixture_ip_ros.core.mixture import cv_folds
+    from mixture_ip_ros.core.novelty import held_out_statistics
+    train, _, thresholds, _ = patterns
+    folds = cv_folds(len(train), 5, 0)
+    lowest = np.inf
+    for f in range(5):
+        part = [d for d, g in zip(train, folds) if g != f]
+        held = [d for d, g in zip(train, folds) if g == f]
+        by_n, windows = held_out_statistics(_fit(part), held, n_alpha=50, min_interval=0.05)
+        for n, values in enumerate(by_n, start=1):
+            assert values.min() >= thresholds.prefix_threshold(n)
+        lowest = min(lowest, windows.min())
+    assert thresholds.window < lowest
