@@ -864,3 +864,17 @@ def test_a_committed_robot_holds_when_the_movement_stops_being_explained(trained
     assert planner.counts.holds == 1 and planner.current.end_reason == 'unexplained'
     assert planner.current.committed and planner.state == 'done'
     assert planner.current.end_elapsed > first.duration   # after the first reach was done
+
+
+def test_poses_lost_before_the_observer_are_counted_from_the_stamps():
+    """A 5 kHz burst of which the queue let 28 % through: the missing ones are counted."""
+    obs = _observer()
+    q = (0.0, 0.0, 0.0, 1.0)
+    rng = np.random.default_rng(3)
+    period = 200_000                                  # 5 kHz
+    stamps = 10**18 + period * np.arange(5000)
+    kept = np.sort(np.r_[np.arange(50), 50 + rng.choice(4950, 1386, replace=False)])
+    for i in kept:                                   # the first 50 all there: the rate is seen
+        assert obs.on_pose(int(stamps[i]), 'world', (0.2, 0.1, 1.0), q, now_ns=1).rejected is None
+    assert obs.period == pytest.approx(period * 1e-9, rel=0.05)
+    assert obs.counts.missing == pytest.approx((kept[-1] + 1) - len(kept), rel=0.02)

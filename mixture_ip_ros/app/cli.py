@@ -3,8 +3,59 @@
 import argparse
 import json
 import logging
+import math
+import os
 import sys
 from pathlib import Path
+
+
+# -- argument types: every option is checked before any work starts -----------------------------
+def _bounded(kind, low=None, high=None, name='a number'):
+    def parse(text):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f'{text!r} is not {name}') from None
+        if kind is float and not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f'{text!r} is not a finite number')
+        if (low is not None and value < low) or (high is not None and value > high):
+            bounds = (f'>= {low}' if high is None else f'<= {high}' if low is None
+                      else f'in [{low}, {high}]')
+            raise argparse.ArgumentTypeError(f'{value} is not {bounds}')
+        return value
+    return parse
+
+
+def _existing_dir(text):
+    if not Path(text).is_dir():
+        raise argparse.ArgumentTypeError(f'{text} is not a folder')
+    return text
+
+
+def _new_file(text):
+    """A file to write: not a folder, and in a folder that exists or can be made (nothing is
+    created now)."""
+    path = Path(text)
+    if path.is_dir():
+        raise argparse.ArgumentTypeError(f'{text} is a folder: name the file to write')
+    _writable_parent(path, text)
+    return text
+
+
+def _out_dir(text):
+    path = Path(text)
+    if path.exists() and not path.is_dir():
+        raise argparse.ArgumentTypeError(f'{text} is a file, not a folder')
+    _writable_parent(path, text)
+    return text
+
+
+def _writable_parent(path, text):
+    parent = path.resolve().parent
+    while not parent.exists():
+        parent = parent.parent
+    if not (parent.is_dir() and os.access(parent, os.W_OK)):
+        raise argparse.ArgumentTypeError(f'cannot write {text}: {parent} is not writable')
 
 
 def _generate(args):
@@ -44,7 +95,7 @@ def _train(args):
         layout = None
         if args.frame:
             kwargs['observed_frame'] = args.frame
-    if args.components:
+    if args.components is not None:
         kwargs['n_components'] = args.components
     else:
         kwargs['candidates'] = range(1, args.max_components + 1)
@@ -124,23 +175,31 @@ def _lifecycle(args):
         rclpy.try_shutdown()
 
 
+class _Parser(argparse.ArgumentParser):
+    """Wrong arguments: one line saying what is wrong (and where the help is), exit code 2."""
+
+    def error(self, message):
+        self.exit(2, f'{self.prog}: error: {message} (see {self.prog} --help)\n')
+
+
 def build_parser():
-    p = argparse.ArgumentParser(prog='mixture-ip', description=__doc__)
+    p = _Parser(prog='mixture-ip', description=__doc__)
     sub = p.add_subparsers(dest='command', required=True)
 
     g = sub.add_parser('generate', help='write a scenario as a folder of rosbag2 bags')
     g.add_argument('--scenario', required=True, choices=['box_assembly', 'pole'])
-    g.add_argument('--out', required=True)
+    g.add_argument('--out', required=True, type=_out_dir)
     g.add_argument('--seed', type=int, default=0)
-    g.add_argument('--occlusion', type=float, default=0.0,
+    g.add_argument('--occlusion', type=_bounded(float, 0.0, 1.0), default=0.0,
                    help='probability that a demonstration has an occlusion gap in the wrist stream')
     g.add_argument('--storage', choices=['mcap', 'sqlite3'], default='mcap')
     g.set_defaults(func=_generate)
 
     t = sub.add_parser('train', help='learn a Mixture of Interaction ProMPs from a folder of bags '
                                      'or of CSV files (one per demonstration)')
-    t.add_argument('bag_dir', nargs='?', default=None, help='folder of demonstration bags')
-    t.add_argument('--csv', default=None, metavar='DIR',
+    t.add_argument('bag_dir', nargs='?', default=None, type=_existing_dir,
+                   help='folder of demonstration bags')
+    t.add_argument('--csv', default=None, metavar='DIR', type=_existing_dir,
                    help='folder of CSV files instead: a time column and named columns; each file '
                         'is one movement, its first row the onset')
     t.add_argument('--observed', default=None, help='observed agent columns, e.g. x,y,z (--csv)')
@@ -153,8 +212,8 @@ def build_parser():
     t.add_argument('--frame', default=None,
                    help='frame the observed agent is expressed in (recorded in the model; bags: '
                         'iiwa_link_0)')
-    t.add_argument('--out', required=True, help='model file (.npz)')
-    t.add_argument('--components', type=int, default=None,
+    t.add_argument('--out', required=True, type=_new_file, help='model file (.npz)')
+    t.add_argument('--components', type=_bounded(int, 1, name='a whole number'), default=None,
                    help='number of components (default: chosen over 1..--max-components)')
     t.add_argument('--criterion', choices=['auto', 'loo', 'loglik'], default='auto',
                    help="how K is chosen: 'loo' leave-one-out RMS of the controlled agent (the "
@@ -165,8 +224,8 @@ def build_parser():
     t.add_argument('--observation-noise', default=None,
                    help='extra online sensor noise std, one number or one per observed DOF, in '
                         'their units (default: 0.01 for a wrist in m from bags, else 0)')
-    t.add_argument('--max-components', type=int, default=6)
-    t.add_argument('--n-basis', type=int, default=15)
+    t.add_argument('--max-components', type=_bounded(int, 1, name='a whole number'), default=6)
+    t.add_argument('--n-basis', type=_bounded(int, 2, name='a whole number'), default=15)
     t.add_argument('--method', choices=['regression', 'em'], default='regression',
                    help="'em' learns from demonstrations with missing data (occlusions)")
     t.add_argument('--on-error', choices=['skip', 'raise'], default='skip')
@@ -175,20 +234,24 @@ def build_parser():
     e = sub.add_parser('evaluate', help="reproduce the thesis's experiments: plots + metrics.json")
     e.add_argument('--scenario', required=True,
                    choices=['box_assembly', 'pole', 'phase', 'missing_data', 'gestures'])
-    e.add_argument('--out', required=True)
+    e.add_argument('--out', required=True, type=_out_dir)
     e.add_argument('--seed', type=int, default=0)
     e.add_argument('--quick', action='store_true', help='fewer components/folds (for smoke runs)')
-    e.add_argument('--bags', default=None,
+    e.add_argument('--bags', default=None, type=_existing_dir,
                    help='evaluate on this folder of bags (with labels.json) instead of generating')
     e.set_defaults(func=_evaluate)
 
     d = sub.add_parser('demo', help='closed loop: bags -> observer -> estimator -> MuJoCo iiwa')
     d.add_argument('--data', default='out/box_assembly_bags',
                    help='folder of demonstration bags (generated if missing)')
-    d.add_argument('--out', default='out/demo', help='model, plots and report go here')
-    d.add_argument('--json', default=None, help='also write the report as JSON here')
-    d.add_argument('--render', default=None, help='write videos and contact sheets here')
-    d.add_argument('--held-out', type=int, default=3, help='interactions replayed per pattern')
+    d.add_argument('--out', default='out/demo', type=_out_dir,
+                   help='model, plots and report go here')
+    d.add_argument('--json', default=None, type=_new_file,
+                   help='also write the report as JSON here')
+    d.add_argument('--render', default=None, type=_out_dir,
+                   help='write videos and contact sheets here')
+    d.add_argument('--held-out', type=_bounded(int, 1, name='a whole number'), default=3,
+                   help='interactions replayed per pattern')
     d.add_argument('--seed', type=int, default=0)
     d.set_defaults(func=_demo)
 
@@ -204,7 +267,7 @@ def build_parser():
     lc.add_argument('node', help='node name, e.g. estimator_node')
     lc.add_argument('transition', choices=['configure', 'activate', 'deactivate', 'cleanup',
                                            'shutdown', 'get'])
-    lc.add_argument('--timeout', type=float, default=10.0,
+    lc.add_argument('--timeout', type=_bounded(float, 0.0), default=10.0,
                     help='s to wait for the service (discovery takes a few seconds)')
     lc.set_defaults(func=_lifecycle)
     return p
@@ -215,9 +278,12 @@ def main(argv=None):
     args = build_parser().parse_args(argv)
     try:
         args.func(args)
-    except (ValueError, FileNotFoundError) as e:
+    except (ValueError, OSError) as e:
         print(f'mixture-ip {args.command}: error: {e}', file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        print(f'mixture-ip {args.command}: interrupted', file=sys.stderr)
+        return 130
     return 0
 
 

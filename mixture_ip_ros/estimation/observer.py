@@ -38,7 +38,11 @@ class ObservedPose:
 
 @dataclass
 class ObserverCounts:
+    """``missing``: poses that never reached the observer (a queue overflowing, a network
+    dropping them), estimated from gaps in the stamps of a stream at a regular rate."""
+
     accepted: int = 0
+    missing: int = 0
     dropped: dict = field(default_factory=lambda: dict.fromkeys(POSE_REJECT_REASONS, 0))
     published: dict = field(default_factory=lambda: dict.fromkeys(
         ('observations', 'onset', 'end', 'gap'), 0))
@@ -59,6 +63,7 @@ class WristObserver:
         self.plausibility = MotionPlausibility(limits)
         self.clock_offset = None      # s, stamp minus clock of the latest pose off the clock
         self._off_clock = 0
+        self.period = None            # s, the stream's sample period (estimated)
         self.segmenter = segmenter
         self.transform = transform if transform is not None else FrameTransform()
         self.expected_frame = expected_frame
@@ -101,6 +106,7 @@ class WristObserver:
         if reason is not None:
             return self.drop(reason)
         self.plausibility.accept(t, point)
+        self._count_missing(stamp_ns)
         self._backwards = self._off_clock = 0
         if self._t_ref_ns is None:
             self._t_ref_ns = stamp_ns
@@ -113,6 +119,17 @@ class WristObserver:
         if restarted_events is not None:
             events = restarted_events + events
         return ObservedPose(point=point, events=events, restarted=restarted_events is not None)
+
+    def _count_missing(self, stamp_ns: int) -> None:
+        """Track the sample period (it adapts slowly; longer steps do not move it) and count the
+        samples a longer step skipped; a silence beyond gap_timeout is a gap, not losses."""
+        if self._last_stamp_ns is None:
+            return
+        dt = (stamp_ns - self._last_stamp_ns) * 1e-9
+        if self.period is None or dt < 1.5 * self.period:
+            self.period = dt if self.period is None else self.period + 0.05 * (dt - self.period)
+        elif dt <= self.segmenter.gap_timeout:
+            self.counts.missing += int(round(dt / self.period)) - 1
 
     def _off(self, stamp_ns: int, now_ns: int) -> bool:
         """Whether the stamp is too far from the clock (not judged before the clock runs)."""
@@ -156,6 +173,7 @@ class WristObserver:
             events = self._settle([Event('end', last_t)])
         self.segmenter.reset()
         self.plausibility.reset()
+        self.period = None
         self.moving = False
         self._t_ref_ns = self._last_stamp_ns = self._last_arrival_ns = None
         self._backwards = 0

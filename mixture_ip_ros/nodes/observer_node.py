@@ -254,6 +254,8 @@ class ObserverNode(ManagedNode):
         new = dropped - self._diag_seen
         self._diag_seen = dropped
         values = {'accepted': counts.accepted, 'moving': self.observer.moving,
+                  'missing_estimated': counts.missing,
+                  'sample_period_s': self.observer.period,
                   **{f'dropped_{k}': v for k, v in counts.dropped.items()},
                   **{f'published_{k}': v for k, v in counts.published.items()},
                   'stream_restarts': counts.stream_restarts,
