@@ -10,7 +10,7 @@ from mixture_ip_ros.app.cli import main
 from mixture_ip_ros.app.training import train, train_to_file
 from mixture_ip_ros.core.basis import GaussianBasis
 from mixture_ip_ros.core.demonstration import Demonstration, Layout
-from mixture_ip_ros.core.mixture import (MixtureIProMP, heldout_loglik_by_components,
+from mixture_ip_ros.core.mixture import (MixtureIProMP, calibrated_heldout_loglik,
                                          loo_rms_by_components, selection_curve)
 from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.core.promp import observation_stats
@@ -72,7 +72,7 @@ def test_demonstration_accepts_1d_arrays_and_no_controlled_agent():
 @pytest.mark.parametrize('Q', [0, 3])
 def test_heldout_loglik_finds_the_sampled_number_of_components(Q):
     demos = mixture_demos(seed=5, n_obs=2, n_ctrl=Q)[0]
-    ll = heldout_loglik_by_components(demos, [1, 2, 3, 4, 5], n_basis=8)
+    ll = calibrated_heldout_loglik(demos, [1, 2, 3, 4, 5], n_basis=8)['scores']
     curve = selection_curve(ll, higher_is_better=True, paired=True)
     assert [1, 2, 3, 4, 5][curve['index']] == 3 and curve['clear']
 
