@@ -278,3 +278,17 @@ def test_train_command_reports_a_bad_csv_in_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith('mixture-ip train: error:') and "no column 'y'" in err
     assert len(err.splitlines()) == 1
+
+
+def test_training_reports_one_progress_count_over_both_curves():
+    demos = mixture_demos(seed=14, counts=(5, 5), durations=((1.0, 1.2), (1.4, 1.6)),
+                          n_obs=1, n_ctrl=1, n_basis=6)[0]
+    calls = []
+    model, info = train(demos, candidates=(1, 2), prior_scales=(1.0, 0.1), n_basis=6,
+                        progress=lambda done, total, K: calls.append((done, total)))
+    n_cal, n_loo = 2 * 2 * 5, 2 * len(demos)          # scales x K x folds, K x demonstrations
+    assert [d for d, _ in calls] == list(range(1, n_cal + n_loo + 1))
+    assert {t for _, t in calls} == {n_cal + n_loo}
+    sel = info['selection']
+    assert sel['prior_scale'] == sel['heldout_loglik']['prior_scale'][sel['chosen'] - 1]
+    assert model.prior_scale == sel['prior_scale']

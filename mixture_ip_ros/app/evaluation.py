@@ -631,18 +631,18 @@ def decimated_rows(t, min_interval):
     return np.array(rows, dtype=int)
 
 
-def phase_known_components(model, demo, fractions, min_interval=0.05):
+def phase_known_components(model, demo, fractions, min_interval=0.05, duration=True):
     """The most probable component (eq. 11) given the first fractions with the phase z = t / T
-    known, hence also alpha = 1/T and its evidence p(alpha | k). The samples are the ones the
-    online estimator absorbs (``min_interval``), so phase known and unknown differ in the phase
-    only."""
+    known, hence also alpha = 1/T and (``duration``) its evidence p(alpha | k). The samples are
+    the ones the online estimator absorbs (``min_interval``), so phase known and unknown differ
+    in the phase only."""
     rows = np.flatnonzero(~np.isnan(demo.observed).any(axis=1))
     rows = rows[decimated_rows(demo.t[rows], min_interval)]
     out = []
     for f in fractions:
         use = rows[rows < _prefix_length(demo, f)]
         out.append(int(np.argmax(model.component_posterior(
-            demo.phase[use], demo.observed[use], alpha=1.0 / demo.duration))))
+            demo.phase[use], demo.observed[use], alpha=1.0 / demo.duration if duration else None))))
     return out
 
 
@@ -784,6 +784,9 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
                    y_test)
     sup_known = accuracy([[cls[k] for k in phase_known_components(
         sup_model, d, fractions, config.min_interval)] for d in test], y_test)
+    # What knowing the phase adds besides the duration: the same without p(alpha | k).
+    sup_shape = accuracy([[cls[k] for k in phase_known_components(
+        sup_model, d, fractions, config.min_interval, duration=False)] for d in test], y_test)
     timings['supervised_s'] = round(time.perf_counter() - t0, 2)
 
     # Baselines, same split, same run.
@@ -826,6 +829,7 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
         'unsupervised_accuracy_phase_known_by_fraction': unsup_known,
         'supervised_accuracy_by_fraction': sup,
         'supervised_accuracy_phase_known_by_fraction': sup_known,
+        'supervised_accuracy_phase_known_without_duration_by_fraction': sup_shape,
         'baseline_promp_accuracy_by_fraction': promp_acc,
         'baseline_sklearn_gmm_accuracy': gmm_acc,
         'baseline_dtw_accuracy': dtw_acc,

@@ -30,7 +30,7 @@ logger = logging.getLogger(__name__)
 CRITERIA = ('auto', 'loo', 'loglik')
 
 
-def text_progress(stream=sys.stderr, what='leave-one-out'):
+def text_progress(stream=sys.stderr, what='choosing K'):
     """A one-line progress bar for the K curves."""
     def show(done, total, K):
         width = 30
@@ -87,9 +87,12 @@ def train(demos, *, n_components=None, candidates=range(1, 7), criterion: str = 
         ll_candidates = [int(k) for k in candidates if k <= n_train]
         if not ll_candidates:
             raise ValueError(f'not enough demonstrations for {n_folds}-fold cross-validation')
+        # One progress count over every fit of both curves.
+        n_cal = len(scales) * len(ll_candidates) * int(min(n_folds, len(demos)))
+        loo_candidates = [int(k) for k in candidates if k <= len(demos) - 1]
+        total = n_cal + (len(loo_candidates) * len(demos) if has_controlled else 0)
         cal = calibrated_heldout_loglik(demos, ll_candidates, scales, n_folds,
-                                        progress if criterion == 'loglik' else None,
-                                        **curve_params)
+                                        _offset_progress(progress, 0, total), **curve_params)
         ll = cal['scores']
         selection['heldout_loglik'] = {
             **_curve_summary(ll_candidates, ll, selection_curve(ll, higher_is_better=True,
@@ -99,13 +102,11 @@ def train(demos, *, n_components=None, candidates=range(1, 7), criterion: str = 
             'mean_by_prior_scale': cal['mean_by_scale'].tolist()}
         floor = dict(zip(ll_candidates, cal['prior_scale']))
         if has_controlled:
-            loo_candidates = [int(k) for k in candidates if k <= len(demos) - 1]
             if not loo_candidates:
                 raise ValueError('not enough demonstrations for leave-one-out')
             rms = np.vstack([
                 loo_rms_by_components(demos, [K], 'final',
-                                      _offset_progress(progress, a, len(loo_candidates))
-                                      if criterion == 'loo' else None,
+                                      _offset_progress(progress, n_cal + a * len(demos), total),
                                       **{**curve_params, 'prior_scale': floor.get(K, scales[0])})
                 for a, K in enumerate(loo_candidates)])
             selection['loo_rms'] = _curve_summary(loo_candidates, rms, selection_curve(rms))
@@ -127,11 +128,11 @@ def train(demos, *, n_components=None, candidates=range(1, 7), criterion: str = 
     return model, info
 
 
-def _offset_progress(progress, index, count):
-    """``progress`` of one K's leave-one-out fits as part of all candidates' fits."""
+def _offset_progress(progress, offset, total):
+    """``progress`` of one batch of fits, ``offset`` fits into ``total`` fits in all."""
     if progress is None:
         return None
-    return lambda done, total, K: progress(index * total + done, count * total, K)
+    return lambda done, _, K: progress(offset + done, total, K)
 
 
 def component_labels(model, demos):
