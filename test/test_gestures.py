@@ -48,6 +48,11 @@ def test_gesture_evaluation_reports_every_method_on_the_same_split(quick_gesture
     assert isinstance(sel['clear_optimum'], bool) and sel['note']
     assert m['n_components_selected'] in sel['candidates']
     assert len(m['component_labels']) == m['n_components_selected']
+    ref = m['reference_k_classes']
+    assert ref['n_components'] == 4 and set(ref['unsupervised_accuracy_by_fraction']) == set(
+        m['supervised_accuracy_by_fraction'])
+    assert set(m['supervised_accuracy_phase_known_without_duration_by_fraction']) == set(
+        m['supervised_accuracy_by_fraction'])
     # Labels never reach the unsupervised fit: every training gesture is in one component.
     assert np.sum(m['clusters_vs_labels']['counts']) == 20
     assert json.loads((out / 'metrics.json').read_text()) == m

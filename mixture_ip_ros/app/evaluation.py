@@ -799,6 +799,19 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
     gmm_acc, gmm_seed = sklearn_gmm_accuracy(W_train, y_train, W_test, y_test, K,
                                              seeds=range(seed, seed + 10))
     timings['baselines_promp_gmm_s'] = round(time.perf_counter() - t0, 2)
+
+    # Reference, not the selected model: K fixed to the number of classes (their count is the
+    # only thing read from the labels), the mixture at the default floor against scikit-learn
+    # with the same K. Shows what the unsupervised fit does when the selection cannot choose.
+    t0 = time.perf_counter()
+    Kc = len(classes)
+    ref = MixtureIProMP(n_components=Kc, random_state=seed, **params).fit(train)
+    ref_names = majority_labels(ref, train)
+    ref_acc = accuracy([[ref_names[k] for k in online_components(
+        ref, d, fractions, config.n_alpha, config.min_interval)] for d in test], y_test)
+    ref_gmm, _ = sklearn_gmm_accuracy(W_train, y_train, W_test, y_test, Kc,
+                                      seeds=range(seed, seed + 10))
+    timings['reference_k_classes_s'] = round(time.perf_counter() - t0, 2)
     t0 = time.perf_counter()
     dtw_acc = dtw_1nn_accuracy([d.observed[:, 0] for d in train], y_train,
                                [d.observed[:, 0] for d in test], y_test)
@@ -842,6 +855,9 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
         'component_labels': names,
         'clusters_vs_labels': {'classes': classes, 'counts': counts.tolist()},
         'baseline_sklearn_gmm_seed': gmm_seed,
+        'reference_k_classes': {'n_components': Kc,
+                                'unsupervised_accuracy_by_fraction': ref_acc,
+                                'baseline_sklearn_gmm_accuracy': ref_gmm},
         'chance_accuracy': chance,
         'n_train': len(train), 'n_test': len(test), 'n_classes': len(classes),
         'durations_s': {'train_median': float(np.median([d.duration for d in train])),
