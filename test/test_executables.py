@@ -57,10 +57,12 @@ def _first_line(proc) -> None:
 @pytest.mark.parametrize('executable', ['observer_node', 'sim_node', 'estimator_node'])
 def test_ctrl_c_while_starting_and_running_exits_cleanly(executable, model):
     """Ctrl-C while the node's module is being imported (rclpy's extension already loaded,
-    Pinocchio, MuJoCo or numba not yet), and once it runs: exit code 0, no traceback."""
+    Pinocchio, MuJoCo or numba not yet), and Ctrl-C or SIGTERM once it runs: exit code 0, no
+    traceback."""
     args = {'observer_node': [], 'sim_node': ['-p', 'real_time_factor:=0.0'],
             'estimator_node': ['-p', f'model_path:={model}']}[executable]
-    for moment in ('importing', 'running'):
+    for moment, sig in (('importing', signal.SIGINT), ('running', signal.SIGINT),
+                        ('running', signal.SIGTERM)):
         proc = subprocess.Popen([str(BIN / executable), '--ros-args', *args], env=_env(),
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
         if moment == 'importing':
@@ -68,7 +70,7 @@ def test_ctrl_c_while_starting_and_running_exits_cleanly(executable, model):
                 pass
         else:
             _first_line(proc)
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(sig)
         try:
             out = proc.communicate(timeout=30)[0].decode(errors='replace')
         except subprocess.TimeoutExpired:

@@ -7,7 +7,10 @@ import json
 import numpy as np
 import pytest
 
-from mixture_ip_ros.app.evaluation import evaluate
+from mixture_ip_ros.app.evaluation import decimated_rows, evaluate
+from mixture_ip_ros.core.mixture import MixtureIProMP
+from mixture_ip_ros.core.online import OnlineEstimator
+from mixture_ip_ros.scenarios.synthetic import mixture_demos
 from mixture_ip_ros.core.segmentation import segment_rest_deviation, sensor_resolution
 from mixture_ip_ros.io.ucr import read_ts
 
@@ -39,10 +42,17 @@ def test_gesture_evaluation_reports_every_method_on_the_same_split(quick_gesture
     assert m['baseline_dtw_accuracy'] > 2 * m['chance_accuracy']
     # The choice of K comes with its curve and a verdict on it.
     sel = m['k_selection']
-    assert len(sel['mean_nats']) == len(sel['candidates']) == 6
+    assert len(sel['mean_nats']) == len(sel['candidates']) == len(sel['prior_scale']) == 6
+    assert sel['prior_scale_selected'] == sel['prior_scale'][sel['candidates'].index(
+        m['n_components_selected'])]
     assert isinstance(sel['clear_optimum'], bool) and sel['note']
     assert m['n_components_selected'] in sel['candidates']
     assert len(m['component_labels']) == m['n_components_selected']
+    ref = m['reference_k_classes']
+    assert ref['n_components'] == 4 and set(ref['unsupervised_accuracy_by_fraction']) == set(
+        m['supervised_accuracy_by_fraction'])
+    assert set(m['supervised_accuracy_phase_known_without_duration_by_fraction']) == set(
+        m['supervised_accuracy_by_fraction'])
     # Labels never reach the unsupervised fit: every training gesture is in one component.
     assert np.sum(m['clusters_vs_labels']['counts']) == 20
     assert json.loads((out / 'metrics.json').read_text()) == m
@@ -73,3 +83,13 @@ def test_rest_deviation_segmentation_is_relative_to_rest_level_and_resolution():
     assert 0.9 <= on <= 1.1 and 1.9 <= end <= 2.1
     # Ten times the scale (another unit): the same times, nothing is a fixed threshold.
     assert segment_rest_deviation(t, 10 * y) == (on, end)
+
+
+def test_phase_known_sees_the_samples_the_online_estimator_absorbs():
+    demos = mixture_demos(seed=3, n_obs=1, n_ctrl=0, n_basis=6)[0]
+    model = MixtureIProMP(3, n_basis=6).fit(demos)
+    t = np.sort(np.random.default_rng(0).uniform(0, 1.5, 200))
+    for min_interval in (0.0, 0.05, 0.13):
+        est = OnlineEstimator(model, min_interval=min_interval)
+        used = [i for i, ti in enumerate(t) if est.update(ti, [0.0])]
+        assert decimated_rows(t, min_interval).tolist() == used

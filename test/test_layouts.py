@@ -5,18 +5,23 @@ import json
 
 import numpy as np
 import pytest
+from scipy.special import logsumexp
+from scipy.stats import multivariate_normal, norm
 
 from mixture_ip_ros.app.cli import main
+from mixture_ip_ros.app.evaluation import prepare
 from mixture_ip_ros.app.training import train, train_to_file
 from mixture_ip_ros.core.basis import GaussianBasis
 from mixture_ip_ros.core.demonstration import Demonstration, Layout
-from mixture_ip_ros.core.mixture import (MixtureIProMP, heldout_loglik_by_components,
-                                         loo_rms_by_components, selection_curve)
+from mixture_ip_ros.core.mixture import (PRIOR_SCALES, MixtureIProMP, calibrated_heldout_loglik,
+                                         heldout_loglik_by_components, loo_rms_by_components,
+                                         selection_curve)
 from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.core.promp import observation_stats
 from mixture_ip_ros.io.csv_files import CsvError, load_csv_dataset, write_csv_demonstration
 from mixture_ip_ros.io.model_file import load_model, model_layout
 
+from mixture_ip_ros.scenarios.generated import generate
 from mixture_ip_ros.scenarios.synthetic import mixture_demos
 
 
@@ -72,9 +77,67 @@ def test_demonstration_accepts_1d_arrays_and_no_controlled_agent():
 @pytest.mark.parametrize('Q', [0, 3])
 def test_heldout_loglik_finds_the_sampled_number_of_components(Q):
     demos = mixture_demos(seed=5, n_obs=2, n_ctrl=Q)[0]
-    ll = heldout_loglik_by_components(demos, [1, 2, 3, 4, 5], n_basis=8)
+    ll = calibrated_heldout_loglik(demos, [1, 2, 3, 4, 5], n_basis=8)['scores']
     curve = selection_curve(ll, higher_is_better=True, paired=True)
     assert [1, 2, 3, 4, 5][curve['index']] == 3 and curve['clear']
+
+
+def test_heldout_loglik_picks_three_patterns_on_box_assembly():
+    # The observed wrist alone cannot tell the patterns from one broad Gaussian (they differ in
+    # the robot's posture); both agents at a calibrated within-pattern floor can.
+    demos = prepare([g.to_demonstration() for g in generate('box_assembly', 0)], subsample=3)
+    cal = calibrated_heldout_loglik(demos, [1, 2, 3, 4], n_basis=10)
+    curve = selection_curve(cal['scores'], higher_is_better=True, paired=True)
+    assert [1, 2, 3, 4][curve['index']] == 3 and curve['clear']
+    assert len(cal['prior_scale']) == 4 and set(cal['prior_scale']) <= set(PRIOR_SCALES)
+
+
+def test_calibrated_curve_is_each_k_at_its_best_floor():
+    demos = mixture_demos(seed=5, n_obs=1, n_ctrl=1)[0][::2]
+    scales = (1.0, 0.01)
+    cal = calibrated_heldout_loglik(demos, [1, 3], scales, n_basis=6)
+    for a, K in enumerate([1, 3]):
+        curves = [heldout_loglik_by_components(demos, [K], n_basis=6, prior_scale=s)[0]
+                  for s in scales]
+        best = int(np.argmax([c.mean() for c in curves]))
+        assert cal['prior_scale'][a] == scales[best]
+        assert np.allclose(cal['scores'][a], curves[best])
+        assert np.allclose(cal['mean_by_scale'][:, a], [c.mean() for c in curves])
+    with pytest.raises(ValueError, match='prior_scales must be positive'):
+        calibrated_heldout_loglik(demos, [1], (0.1, -1.0), n_basis=6)
+
+
+def test_score_demonstrations_is_the_dense_marginal_likelihood_of_both_agents():
+    demos = mixture_demos(seed=12, n_obs=2, n_ctrl=1, n_basis=6)[0]
+    model = MixtureIProMP(3, n_basis=6).fit(demos)
+    d = demos[0]
+    idx = np.arange(0, d.t.size, 7)
+    t = d.t[idx] * d.duration / d.t[idx][-1]            # keep t[-1] = T: same phase and alpha
+    Y = np.hstack([d.observed, d.controlled])[idx]
+    Y[3, 0] = Y[3, 1] = np.nan                          # a missing observed sample is skipped
+    held = Demonstration(t, Y[:, :2], Y[:, 2:])
+    z = t / t[-1]
+    A = np.kron(np.eye(3), GaussianBasis(6)(z))         # eq. 19 for all DOFs, DOF-major
+    y = Y.T.ravel()
+    ok = ~np.isnan(y)
+    terms = []
+    for k in range(3):
+        S = np.diag(np.repeat(model.noise_var_, len(t))) + A @ model.covariances_[k] @ A.T
+        lp = multivariate_normal(A[ok] @ model.means_[k], S[np.ix_(ok, ok)]).logpdf(y[ok])
+        lp += norm(model.alpha_mean_[k], model.alpha_std_[k]).logpdf(1.0 / t[-1])
+        terms.append(np.log(model.weights_[k]) + lp)
+    assert model.score_demonstrations([held])[0] == pytest.approx(logsumexp(terms), rel=1e-9)
+
+
+def test_covariance_floor_is_a_fraction_of_the_within_component_variance():
+    demos, labels, _, _ = mixture_demos(seed=13, n_obs=1, n_ctrl=1, n_basis=6)
+    model = MixtureIProMP(3, n_basis=6, prior_scale=0.5).fit(demos, labels=labels)
+    W = model.demonstration_weights(demos)
+    E = W - np.array([W[labels == k].mean(axis=0) for k in range(3)])[labels]
+    within = E.T @ E / len(W)                          # pooled within-class covariance
+    assert np.allclose(model.prior_cov_, within + 0.5 * np.diag(np.diag(within)))
+    # the spread between the classes is no part of it
+    assert np.all(np.diag(model.prior_cov_) < 1.5 * W.var(axis=0))
 
 
 def test_leave_one_out_finds_the_sampled_number_of_components_and_needs_a_controlled_agent():
@@ -215,3 +278,17 @@ def test_train_command_reports_a_bad_csv_in_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith('mixture-ip train: error:') and "no column 'y'" in err
     assert len(err.splitlines()) == 1
+
+
+def test_training_reports_one_progress_count_over_both_curves():
+    demos = mixture_demos(seed=14, counts=(5, 5), durations=((1.0, 1.2), (1.4, 1.6)),
+                          n_obs=1, n_ctrl=1, n_basis=6)[0]
+    calls = []
+    model, info = train(demos, candidates=(1, 2), prior_scales=(1.0, 0.1), n_basis=6,
+                        progress=lambda done, total, K: calls.append((done, total)))
+    n_cal, n_loo = 2 * 2 * 5, 2 * len(demos)          # scales x K x folds, K x demonstrations
+    assert [d for d, _ in calls] == list(range(1, n_cal + n_loo + 1))
+    assert {t for _, t in calls} == {n_cal + n_loo}
+    sel = info['selection']
+    assert sel['prior_scale'] == sel['heldout_loglik']['prior_scale'][sel['chosen'] - 1]
+    assert model.prior_scale == sel['prior_scale']

@@ -10,10 +10,11 @@
   with a block of 180 missing samples; EM log-likelihood per iteration.
 - gestures (real human motion, beyond the thesis): PickupGestureWiimoteZ (scenarios.gestures), a
   single-agent set: who made the gesture, from the first 30/50/70/100 % of it, by the
-  unsupervised mixture (K by held-out log-likelihood, components named by majority over the
-  training labels), phase unknown (online) and known; by the supervised mixture (one component
-  per class); and baselines on the same split in the same run: a per-class ProMP, scikit-learn's
-  GaussianMixture on the same ridge weights, 1-NN DTW.
+  unsupervised mixture (K by held-out log-likelihood at calibrated covariance floors, components
+  named by majority over the training labels), phase unknown (online) and known (the same
+  samples); by the supervised mixture (one component per class); and baselines on the same
+  split in the same run: a per-class ProMP, scikit-learn's GaussianMixture on the same ridge
+  weights, 1-NN DTW.
 
 Everything is leave-one-out (or a separate test set for the letters): a held-out demonstration
 never reaches the model it is tested on. Labels are read for scoring only.
@@ -139,9 +140,7 @@ def evaluate(scenario: str, out_dir: Path, seed: int = 0, quick: bool = False, *
         from mixture_ip_ros.scenarios import gestures
         metrics = evaluate_gestures(
             gestures.gesture_demonstrations('train'), gestures.gesture_demonstrations('test'),
-            out_dir, config or gesture_config(quick), seed,
-            raw_train=[d.observed[:, 0] for d in gestures.gesture_demonstrations('train', False)],
-            raw_test=[d.observed[:, 0] for d in gestures.gesture_demonstrations('test', False)])
+            out_dir, config or gesture_config(quick), seed)
         source = gestures.SOURCE
     else:
         cfg = config or letter_config(quick)
@@ -621,15 +620,29 @@ def online_components(model, demo, fractions, n_alpha=50, min_interval=0.05):
     return out
 
 
-def phase_known_components(model, demo, fractions):
+def decimated_rows(t, min_interval):
+    """Indices of the samples the online estimator absorbs from times ``t``: the first, then
+    each one at least ``min_interval`` after the last one absorbed (OnlineEstimator.admit)."""
+    rows, last = [], None
+    for i, ti in enumerate(t):
+        if last is None or ti - last >= min_interval - 1e-9:
+            rows.append(i)
+            last = ti
+    return np.array(rows, dtype=int)
+
+
+def phase_known_components(model, demo, fractions, min_interval=0.05, duration=True):
     """The most probable component (eq. 11) given the first fractions with the phase z = t / T
-    known, hence also alpha = 1/T and its evidence p(alpha | k)."""
+    known, hence also alpha = 1/T and (``duration``) its evidence p(alpha | k). The samples are
+    the ones the online estimator absorbs (``min_interval``), so phase known and unknown differ
+    in the phase only."""
+    rows = np.flatnonzero(~np.isnan(demo.observed).any(axis=1))
+    rows = rows[decimated_rows(demo.t[rows], min_interval)]
     out = []
     for f in fractions:
-        n = _prefix_length(demo, f)
-        ok = ~np.isnan(demo.observed[:n]).any(axis=1)
+        use = rows[rows < _prefix_length(demo, f)]
         out.append(int(np.argmax(model.component_posterior(
-            demo.phase[:n][ok], demo.observed[:n][ok], alpha=1.0 / demo.duration))))
+            demo.phase[use], demo.observed[use], alpha=1.0 / demo.duration if duration else None))))
     return out
 
 
@@ -708,25 +721,21 @@ def _majority_names(assigned, labels, n_components):
     return out
 
 
-def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None, seed: int = 0,
-                      raw_train=None, raw_test=None) -> dict:
+def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
+                      seed: int = 0) -> dict:
     """Recognition of who made a gesture from part of it; see the module docstring.
 
-    ``train``/``test``: labelled single-agent Demonstrations (onset to end); ``raw_train``/
-    ``raw_test``: the whole recordings for the DTW baseline (default: the same demonstrations).
-    Labels never reach the unsupervised fit; they name its components afterwards.
+    ``train``/``test``: labelled single-agent Demonstrations (every method, DTW included, sees
+    the same series). Labels never reach the unsupervised fit; they name its components
+    afterwards.
     """
     from mixture_ip_ros.viz import plots
-    from mixture_ip_ros.core.mixture import heldout_loglik_by_components, selection_curve
+    from mixture_ip_ros.core.mixture import calibrated_heldout_loglik, selection_curve
     config = config or gesture_config()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    raw_train = raw_train if raw_train is not None else [d.observed[:, 0] for d in train]
-    raw_test = raw_test if raw_test is not None else [d.observed[:, 0] for d in test]
     if config.classes is not None:
         keep = {str(c) for c in config.classes}
-        raw_train = [r for r, d in zip(raw_train, train) if d.label in keep]
-        raw_test = [r for r, d in zip(raw_test, test) if d.label in keep]
         train = [d for d in train if d.label in keep]
         test = [d for d in test if d.label in keep]
     if any(d.label is None for d in train + test):
@@ -739,13 +748,18 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None, see
     params = dict(config.model)
     timings = {}
 
-    # Unsupervised: K by the held-out log-likelihood of the observed agent (labels unused).
+    # Unsupervised: K by the held-out log-likelihood, each K at its calibrated covariance floor
+    # (labels unused); the model is fitted with the chosen K and floor, as training does.
     t0 = time.perf_counter()
     candidates = [int(k) for k in config.candidates if k <= len(train) - len(train) // 5]
-    ll = heldout_loglik_by_components(train, candidates, n_folds=5, fold_seed=seed, **params)
+    cal = calibrated_heldout_loglik(train, candidates, n_folds=5, fold_seed=seed,
+                                    **{'method': 'regression', **params})
+    ll = cal['scores']
     curve = selection_curve(ll, higher_is_better=True, paired=True)
     K = candidates[curve['index']]
-    model = MixtureIProMP(n_components=K, random_state=seed, **params).fit(train)
+    floor = cal['prior_scale'][curve['index']]
+    model = MixtureIProMP(n_components=K, random_state=seed,
+                          **{**params, 'prior_scale': floor}).fit(train)
     timings['unsupervised_fit_s'] = round(time.perf_counter() - t0, 2)
     names = majority_labels(model, train)
 
@@ -756,8 +770,8 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None, see
     unsup = accuracy([[names[k] for k in online_components(model, d, fractions, config.n_alpha,
                                                            config.min_interval)] for d in test],
                      y_test)
-    unsup_known = accuracy([[names[k] for k in phase_known_components(model, d, fractions)]
-                            for d in test], y_test)
+    unsup_known = accuracy([[names[k] for k in phase_known_components(
+        model, d, fractions, config.min_interval)] for d in test], y_test)
     timings['unsupervised_test_s'] = round(time.perf_counter() - t0, 2)
 
     # Supervised: one component per class, tied noise and one covariance prior for all.
@@ -768,8 +782,11 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None, see
     sup = accuracy([[cls[k] for k in online_components(sup_model, d, fractions, config.n_alpha,
                                                        config.min_interval)] for d in test],
                    y_test)
-    sup_known = accuracy([[cls[k] for k in phase_known_components(sup_model, d, fractions)]
-                          for d in test], y_test)
+    sup_known = accuracy([[cls[k] for k in phase_known_components(
+        sup_model, d, fractions, config.min_interval)] for d in test], y_test)
+    # What knowing the phase adds besides the duration: the same without p(alpha | k).
+    sup_shape = accuracy([[cls[k] for k in phase_known_components(
+        sup_model, d, fractions, config.min_interval, duration=False)] for d in test], y_test)
     timings['supervised_s'] = round(time.perf_counter() - t0, 2)
 
     # Baselines, same split, same run.
@@ -782,8 +799,22 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None, see
     gmm_acc, gmm_seed = sklearn_gmm_accuracy(W_train, y_train, W_test, y_test, K,
                                              seeds=range(seed, seed + 10))
     timings['baselines_promp_gmm_s'] = round(time.perf_counter() - t0, 2)
+
+    # Reference, not the selected model: K fixed to the number of classes (their count is the
+    # only thing read from the labels), the mixture at the default floor against scikit-learn
+    # with the same K. Shows what the unsupervised fit does when the selection cannot choose.
     t0 = time.perf_counter()
-    dtw_acc = dtw_1nn_accuracy(raw_train, y_train, raw_test, y_test)
+    Kc = len(classes)
+    ref = MixtureIProMP(n_components=Kc, random_state=seed, **params).fit(train)
+    ref_names = majority_labels(ref, train)
+    ref_acc = accuracy([[ref_names[k] for k in online_components(
+        ref, d, fractions, config.n_alpha, config.min_interval)] for d in test], y_test)
+    ref_gmm, _ = sklearn_gmm_accuracy(W_train, y_train, W_test, y_test, Kc,
+                                      seeds=range(seed, seed + 10))
+    timings['reference_k_classes_s'] = round(time.perf_counter() - t0, 2)
+    t0 = time.perf_counter()
+    dtw_acc = dtw_1nn_accuracy([d.observed[:, 0] for d in train], y_train,
+                               [d.observed[:, 0] for d in test], y_test)
     timings['baseline_dtw_s'] = round(time.perf_counter() - t0, 2)
 
     assigned = np.argmax(model.resp_, axis=1)
@@ -803,7 +834,7 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None, see
                              [n or '-' for n in names], classes,
                              f'Unsupervised mixture, K = {K}: training gestures per component')
     plots.loglik_vs_k(out_dir / 'gestures_loglik_vs_k.png', candidates, ll, K,
-                      'Gestures: 5-fold held-out log-likelihood of the observed agent vs K',
+                      'Gestures: 5-fold held-out log-likelihood vs K (each at its calibrated floor)',
                       curve['note'])
     return {
         'n_components_selected': int(K),
@@ -811,15 +842,22 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None, see
         'unsupervised_accuracy_phase_known_by_fraction': unsup_known,
         'supervised_accuracy_by_fraction': sup,
         'supervised_accuracy_phase_known_by_fraction': sup_known,
+        'supervised_accuracy_phase_known_without_duration_by_fraction': sup_shape,
         'baseline_promp_accuracy_by_fraction': promp_acc,
         'baseline_sklearn_gmm_accuracy': gmm_acc,
         'baseline_dtw_accuracy': dtw_acc,
-        'k_selection': {'criterion': 'held-out log-likelihood of the observed agent, 5 folds',
+        'k_selection': {'criterion': 'held-out log-likelihood, 5 folds, each K at its '
+                                     'calibrated covariance floor',
                         'candidates': candidates, 'mean_nats': curve['mean'],
+                        'se_nats': curve['se'], 'prior_scale': cal['prior_scale'],
+                        'prior_scale_selected': floor,
                         'clear_optimum': curve['clear'], 'note': curve['note']},
         'component_labels': names,
         'clusters_vs_labels': {'classes': classes, 'counts': counts.tolist()},
         'baseline_sklearn_gmm_seed': gmm_seed,
+        'reference_k_classes': {'n_components': Kc,
+                                'unsupervised_accuracy_by_fraction': ref_acc,
+                                'baseline_sklearn_gmm_accuracy': ref_gmm},
         'chance_accuracy': chance,
         'n_train': len(train), 'n_test': len(test), 'n_classes': len(classes),
         'durations_s': {'train_median': float(np.median([d.duration for d in train])),
@@ -827,7 +865,7 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None, see
                                         float(max(d.duration for d in train))]},
         'noise_var': np.asarray(model.noise_var_).tolist(),
         'units': {'accuracy': 'fraction of test gestures whose person is named correctly',
-                  'fractions': 'part of the movement (onset to end) observed',
+                  'fractions': 'part of the recording observed (from its first sample)',
                   'noise_var': 'g^2'},
         'timings_s': timings,
         'config': config.to_dict(),

@@ -2,13 +2,15 @@
 layout: the observed agent with >= 1 DOF, the controlled agent with >= 0.
 
 K, unless given, is chosen from candidates by two criteria, each a curve over K:
+- the cross-validated held-out log-likelihood of the demonstrations (both agents, phase known),
+  for every layout, each K at the covariance floor its held-out likelihood prefers
+  (:func:`core.mixture.calibrated_heldout_loglik`);
 - the thesis's leave-one-out RMS of the controlled agent given the final observed position
-  (Figs. 8/10), where there is a controlled agent;
-- the cross-validated held-out log-likelihood of the observed agent (phase known), for every
-  layout.
+  (Figs. 8/10), where there is a controlled agent, each K fitted with that floor.
 ``criterion='auto'`` decides by leave-one-out where there is a controlled agent (the thesis) and
-by the held-out log-likelihood otherwise; both curves, the choice and whether the deciding curve
-has a clear optimum go into the training summary.
+by the held-out log-likelihood otherwise; both curves, the choice, the floor and whether the
+deciding curve has a clear optimum go into the training summary. The model is fitted with the
+chosen K and its floor (``prior_scale`` given by the caller is used as is).
 """
 
 import inspect
@@ -19,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from mixture_ip_ros.core.demonstration import Layout
-from mixture_ip_ros.core.mixture import (MixtureIProMP, heldout_loglik_by_components,
+from mixture_ip_ros.core.mixture import (PRIOR_SCALES, MixtureIProMP, calibrated_heldout_loglik,
                                          loo_rms_by_components, selection_curve)
 from mixture_ip_ros.core.novelty import calibrate as calibrate_novelty
 from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE, bag_layout
@@ -30,20 +32,7 @@ logger = logging.getLogger(__name__)
 CRITERIA = ('auto', 'loo', 'loglik')
 
 
-def choose_n_components(demos, candidates, progress=None, **params):
-    """K by leave-one-out (thesis Figs. 8/10): RMS of the held-out controlled trajectory given
-    its final observed position, for every candidate K; the plateau's first K is chosen.
-
-    Returns (K, rms) with rms of shape (len(candidates), n_demos).
-    """
-    candidates = [int(k) for k in candidates if k <= len(demos) - 1]
-    if not candidates:
-        raise ValueError('not enough demonstrations for leave-one-out')
-    rms = loo_rms_by_components(demos, candidates, 'final', progress, **params)
-    return candidates[selection_curve(rms)['index']], rms
-
-
-def text_progress(stream=sys.stderr, what='leave-one-out'):
+def text_progress(stream=sys.stderr, what='choosing K'):
     """A one-line progress bar for the K curves."""
     def show(done, total, K):
         width = 30
@@ -64,12 +53,14 @@ def _curve_summary(candidates, scores, curve):
 
 
 def train(demos, *, n_components=None, candidates=range(1, 7), criterion: str = 'auto',
-          n_folds: int = 5, progress=None, labels=None, **params):
+          n_folds: int = 5, progress=None, labels=None, prior_scales=PRIOR_SCALES, **params):
     """Fit the mixture; K given, or chosen by ``criterion`` ('auto', 'loo', 'loglik'; see the
     module docstring). ``labels`` makes a supervised fit (one component per class, K = number
-    of classes). ``params`` go to MixtureIProMP. Returns (model, info dict): info['selection']
-    holds every curve computed, the criterion, the chosen K and whether its curve has a clear
-    optimum (a flat curve is reported as such, never silently read as K = 1).
+    of classes). ``params`` go to MixtureIProMP; without ``prior_scale`` among them, the floor
+    is calibrated over ``prior_scales`` when K is chosen. Returns (model, info dict):
+    info['selection'] holds every curve computed, the criterion, the chosen K, its floor and
+    whether its curve has a clear optimum (a flat curve is reported as such, never silently
+    read as K = 1).
     """
     demos = list(demos)
     if criterion not in CRITERIA:
@@ -92,33 +83,44 @@ def train(demos, *, n_components=None, candidates=range(1, 7), criterion: str = 
         # fit takes 10-30 s, and leave-one-out needs one per demonstration and candidate K
         # (hours). The final model below is fitted with the method asked for.
         curve_params = {**params, 'method': 'regression'}
+        scales = [params['prior_scale']] if 'prior_scale' in params else list(prior_scales)
         selection = {'criterion': criterion}
+        n_train = len(demos) - int(np.ceil(len(demos) / min(n_folds, len(demos))))
+        ll_candidates = [int(k) for k in candidates if k <= n_train]
+        if not ll_candidates:
+            raise ValueError(f'not enough demonstrations for {n_folds}-fold cross-validation')
+        # One progress count over every fit of both curves.
+        n_cal = len(scales) * len(ll_candidates) * int(min(n_folds, len(demos)))
+        loo_candidates = [int(k) for k in candidates if k <= len(demos) - 1]
+        total = n_cal + (len(loo_candidates) * len(demos) if has_controlled else 0)
+        cal = calibrated_heldout_loglik(demos, ll_candidates, scales, n_folds,
+                                        _offset_progress(progress, 0, total), **curve_params)
+        ll = cal['scores']
+        selection['heldout_loglik'] = {
+            **_curve_summary(ll_candidates, ll, selection_curve(ll, higher_is_better=True,
+                                                               paired=True)),
+            'n_folds': int(min(n_folds, len(demos))), 'unit': 'nats per demonstration',
+            'prior_scale': cal['prior_scale'], 'prior_scales': cal['prior_scales'],
+            'mean_by_prior_scale': cal['mean_by_scale'].tolist()}
+        floor = dict(zip(ll_candidates, cal['prior_scale']))
         if has_controlled:
-            loo_candidates = [int(k) for k in candidates if k <= len(demos) - 1]
             if not loo_candidates:
                 raise ValueError('not enough demonstrations for leave-one-out')
-            rms = loo_rms_by_components(demos, loo_candidates, 'final',
-                                        progress if criterion == 'loo' else None, **curve_params)
+            rms = np.vstack([
+                loo_rms_by_components(demos, [K], 'final',
+                                      _offset_progress(progress, n_cal + a * len(demos), total),
+                                      **{**curve_params, 'prior_scale': floor.get(K, scales[0])})
+                for a, K in enumerate(loo_candidates)])
             selection['loo_rms'] = _curve_summary(loo_candidates, rms, selection_curve(rms))
             info['loo_method'] = 'regression'
             info['loo_candidates'] = loo_candidates
             info['loo_rms_mean'] = rms.mean(axis=1).tolist()
             info['loo_rms_std'] = rms.std(axis=1).tolist()
-        n_train = len(demos) - int(np.ceil(len(demos) / min(n_folds, len(demos))))
-        ll_candidates = [int(k) for k in candidates if k <= n_train]
-        if not ll_candidates:
-            raise ValueError(f'not enough demonstrations for {n_folds}-fold cross-validation')
-        ll = heldout_loglik_by_components(demos, ll_candidates, n_folds,
-                                          progress if criterion == 'loglik' else None,
-                                          **curve_params)
-        selection['heldout_loglik'] = {
-            **_curve_summary(ll_candidates, ll, selection_curve(ll, higher_is_better=True,
-                                                               paired=True)),
-            'n_folds': int(min(n_folds, len(demos))), 'unit': 'nats per demonstration'}
         chosen = selection['loo_rms' if criterion == 'loo' else 'heldout_loglik']
         n_components = chosen['chosen']
+        params = {**params, 'prior_scale': floor.get(n_components, scales[0])}
         selection.update(chosen=int(n_components), clear_optimum=chosen['clear_optimum'],
-                         note=chosen['note'])
+                         note=chosen['note'], prior_scale=params['prior_scale'])
         if not chosen['clear_optimum']:
             logger.warning('K = %d by %s, but %s', n_components, criterion, chosen['note'])
         info['selection'] = selection
@@ -126,6 +128,13 @@ def train(demos, *, n_components=None, candidates=range(1, 7), criterion: str = 
     info['n_components'] = int(n_components)
     info['noise_var'] = np.asarray(model.noise_var_).tolist()
     return model, info
+
+
+def _offset_progress(progress, offset, total):
+    """``progress`` of one batch of fits, ``offset`` fits into ``total`` fits in all."""
+    if progress is None:
+        return None
+    return lambda done, _, K: progress(offset + done, total, K)
 
 
 def component_labels(model, demos):
@@ -171,7 +180,8 @@ def train_to_file(demos, out_path, layout: Layout = None, observed_frame: str = 
     model, info = train(demos, **kwargs)
     if kwargs.get('labels') is None:
         # Held-out folds fitted by regression, as the K curves: EM would take minutes.
-        params = {**_model_params(kwargs), 'method': 'regression'}
+        params = {**_model_params(kwargs), 'method': 'regression',
+                  'prior_scale': model.prior_scale}      # the floor chosen with K
         model.novelty_ = calibrate_novelty(
             demos, lambda part: MixtureIProMP(n_components=model.n_components,
                                               **params).fit(part))

@@ -101,9 +101,11 @@ class MixtureIProMP:
     component covariance (conjugate prior, so EM stays monotone in the penalised likelihood):
     the within-component covariance pooled over the initial clusters (k-means, or the labels of
     a supervised fit; ``method='regression'``) plus a diagonal floor of ``prior_scale`` times
-    each weight's variance over all demonstrations. Every component shrinks towards the same
+    each weight's variance within those clusters. Every component shrinks towards the same
     target with the same strength, so their likelihoods stay comparable; this keeps every
-    component positive definite with fewer members than weights and its posterior calibrated.
+    component positive definite with fewer members than weights. How much floor a data set
+    needs is calibrated by held-out likelihood (:func:`calibrated_heldout_loglik`, which
+    training uses when it chooses K).
 
     Noise: ``noise='tied'`` (default) learns one variance per DOF shared by all components
     (pooled residuals), so components are compared on the same noise floor; 'per_component'
@@ -168,25 +170,29 @@ class MixtureIProMP:
         alphas = np.array([1.0 / demo.duration for demo in demos])
         timing = timing_variance([demo.duration for demo in demos],
                                  [float(np.median(np.diff(demo.t))) for demo in demos])
-        floor = self.prior_scale * np.maximum(W.var(axis=0), 1e-12)
+        w_var = np.maximum(W.var(axis=0), 1e-12)
         if labels is None:
             self.classes_ = None
-            a_scale = np.sqrt(self.prior_scale * max(alphas.var(), timing.mean(), 1e-24))
-            init = kmeans(np.column_stack([W / np.sqrt(floor), alphas / a_scale]), K,
+            a_scale = np.sqrt(max(alphas.var(), timing.mean(), 1e-24))
+            init = kmeans(np.column_stack([W / np.sqrt(w_var), alphas / a_scale]), K,
                           random_state=self.random_state, n_init=self.n_init)
         else:
             self.classes_, init = _label_indices(labels, n, K)
         resp = np.eye(K)[init]
         # Shrinkage target: the within-component covariance pooled over the initial clusters
-        # (shape variability shared by all patterns) plus a small diagonal floor. A component
-        # with a dozen members then borrows the pooled structure instead of trusting spurious
-        # correlations of its own sample covariance.
+        # (shape variability shared by all patterns) plus a diagonal floor. A component with a
+        # dozen members then borrows the pooled structure instead of trusting spurious
+        # correlations of its own sample covariance. The floor is ``prior_scale`` times each
+        # weight's variance within the clusters, not over all demonstrations: the spread between
+        # patterns is no part of any one component's variability, and a floor that contains it
+        # blurs every component by the distance between them (with K = 1 both are the same).
         # With missing data ('em') the starting weights are unreliable where a demonstration
         # has gaps, so the target is the diagonal floor alone.
+        E = W - np.array([W[init == k].mean(axis=0) if np.any(init == k) else W.mean(axis=0)
+                          for k in range(K)])[init]
+        floor = self.prior_scale * np.maximum((E ** 2).mean(axis=0), 1e-12 * w_var.max())
         self.prior_cov_ = np.diag(floor)
         if self.method == 'regression':
-            E = W - np.array([W[init == k].mean(axis=0) if np.any(init == k) else W.mean(axis=0)
-                              for k in range(K)])[init]
             self.prior_cov_ += E.T @ E / n
         # The same for alpha: the within-cluster variance pooled over the initial clusters, at
         # least what the sampling leaves (timing).
@@ -335,17 +341,30 @@ class MixtureIProMP:
         return np.exp(lp - logsumexp(lp))
 
     def score_demonstrations(self, demonstrations):
-        """log p(D_i, alpha_i) of each demonstration's observed agent and phase speed, phase known
-        (z = t / T): eq. 6 over components with the marginal likelihood of eq. 21 and the
-        component's p(alpha | k). The held-out criterion for K."""
+        """log p(D_i, alpha_i) of each demonstration, every DOF of both agents, phase known
+        (z = t / T): eq. 6 over components with the marginal likelihood of eq. 21 in the space
+        the mixture lives in (the stacked weights of both agents, under the learned noise of
+        eq. 15) and the component's p(alpha | k). The held-out criterion for K.
+
+        Both agents, because a pattern is a joint movement: where the patterns differ mostly in
+        the controlled agent (the robot's posture for the same reach), the observed agent alone
+        cannot tell a mixture from one broad Gaussian. Missing samples (NaN) are skipped."""
         self._check_fitted()
+        chols = [linalg.cho_factor(c, lower=True) for c in self.covariances_]
+        noise = np.broadcast_to(self.noise_var_, (self.n_components, self.noise_var_.shape[-1]))
+        log_w = np.log(self.weights_)
         out = []
         for demo in demonstrations:
-            ok = ~np.isnan(demo.observed).any(axis=1)
-            lp = (np.log(self.weights_)
-                  + self.component_log_evidence(demo.phase[ok], demo.observed[ok])
-                  + alpha_log_density([1.0 / demo.duration], self.alpha_mean_,
-                                      self.alpha_std_ ** 2)[0])
+            Y = np.hstack([demo.observed, demo.controlled])
+            if Y.shape[1] != noise.shape[1]:
+                raise ValueError(f'demonstration {demo.name!r} has {demo.n_observed_dofs} + '
+                                 f'{demo.n_controlled_dofs} DOFs; the model has '
+                                 f'{self.n_observed_} + {self.n_controlled_}')
+            st = observation_stats(self.basis_, demo.phase, Y)
+            lp = log_w + alpha_log_density([1.0 / demo.duration], self.alpha_mean_,
+                                           self.alpha_std_ ** 2)[0]
+            lp += [weight_posterior(st, self.means_[k], chols[k], noise[k])[2]
+                   for k in range(self.n_components)]
             out.append(float(logsumexp(lp)))
         return np.array(out)
 
@@ -468,8 +487,8 @@ def cv_folds(n: int, n_folds: int, random_state=0):
 
 def heldout_loglik_by_components(demonstrations, candidates, n_folds: int = 5, progress=None,
                                  fold_seed=0, **params):
-    """Cross-validated log-likelihood of the observed agent of held-out demonstrations,
-    log p(D_i) with the phase known (:meth:`MixtureIProMP.score_demonstrations`), for every K in
+    """Cross-validated log-likelihood of held-out demonstrations, log p(D_i, alpha_i) of both
+    agents with the phase known (:meth:`MixtureIProMP.score_demonstrations`), for every K in
     ``candidates``: works with or without a controlled agent. The same folds for every K, so
     the curves are paired. Returns (len(candidates), n); higher is better.
     """
@@ -487,6 +506,51 @@ def heldout_loglik_by_components(demonstrations, candidates, n_folds: int = 5, p
             if progress:
                 progress(done, total, K)
     return out
+
+
+# Covariance floors tried by :func:`calibrated_heldout_loglik`, as fractions of the within-
+# component variance per weight: half decades wide enough for every scenario evaluated (their
+# optima range from 3e-4, smooth generated reaches, to 1, letters and sampled covariances).
+PRIOR_SCALES = tuple(float(f'{10.0 ** e:.3g}') for e in np.arange(0.5, -4.01, -0.5))
+
+
+def calibrated_heldout_loglik(demonstrations, candidates, prior_scales=PRIOR_SCALES,
+                              n_folds: int = 5, progress=None, fold_seed=0, **params):
+    """:func:`heldout_loglik_by_components` with the covariance floor (``prior_scale``)
+    calibrated by the same criterion, for every K its own.
+
+    The floor is the variance a component gets in the directions its few members do not span
+    (fewer demonstrations than weights). Too small, and a held-out demonstration of the same
+    pattern falls outside the component; too large, and the components blur into each other.
+    The right amount depends on the data (smooth generated reaches want 1e-3 of the within-
+    pattern variance, sampled covariances and letters 0.3 to 3), so no fixed value is right
+    for every data set, and each K is compared at the floor its held-out likelihood prefers.
+    The same folds for every scale and K; the maximum over a few scales makes every K's
+    curve equally optimistic, so the paired comparison between K stays fair.
+
+    Returns a dict: 'scores' (len(candidates), n), each K's per-demonstration held-out
+    log-likelihood at its best scale; 'prior_scale' (per candidate); 'prior_scales' and
+    'mean_by_scale' (len(prior_scales), len(candidates)), the mean of every curve tried.
+    """
+    demos = list(demonstrations)
+    scales = [float(s) for s in prior_scales]
+    if not scales or not all(np.isfinite(s) and s > 0 for s in scales):
+        raise ValueError(f'prior_scales must be positive numbers, got {prior_scales!r}')
+    params = {k: v for k, v in params.items() if k != 'prior_scale'}
+    per_scale = len(candidates) * int(min(n_folds, len(demos)))
+    all_scores = []
+    for b, scale in enumerate(scales):
+        step = (None if progress is None else
+                lambda done, total, K, b=b: progress(b * per_scale + done, len(scales) * per_scale,
+                                                     K))
+        all_scores.append(heldout_loglik_by_components(demos, candidates, n_folds, step,
+                                                       fold_seed, prior_scale=scale, **params))
+    S = np.array(all_scores)                          # (scales, candidates, n)
+    mean = S.mean(axis=2)
+    best = np.argmax(mean, axis=0)
+    return {'scores': S[best, np.arange(len(candidates))],
+            'prior_scale': [scales[b] for b in best], 'prior_scales': scales,
+            'mean_by_scale': mean}
 
 
 def select_n_components(scores, higher_is_better: bool = False, paired: bool = False):

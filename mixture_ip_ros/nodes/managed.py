@@ -14,10 +14,13 @@ itself, so ``ros2 run``-style use is one command; with false it waits for the li
 (``mixture-ip lifecycle NODE TRANSITION``).
 """
 
+import signal
+
 import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.logging import get_logger
+from rclpy.signals import SignalHandlerOptions
 
 from mixture_ip_ros.nodes.params import declare
 from mixture_ip_ros.nodes.spinning import spin_until_shutdown
@@ -118,22 +121,42 @@ class ManagedNode(LifecycleNode):
                 f'{p.name} = {p.value}' for p in parameters))
 
 
+class _Interrupts:
+    """SIGINT and SIGTERM for a node executable: while it starts, a KeyboardInterrupt (start-up
+    is abandoned); once it spins, a request the spin loop sees after the callback in progress.
+    rclpy's own handler is not used: it shuts the context down from another thread, at any
+    point of a callback, and was seen to leave a node spinning on (SIGINT ignored at start, as
+    for a shell's background job) or to crash it while it published."""
+
+    def __init__(self):
+        self.requested = False
+        self.spinning = False
+
+    def __call__(self, signum, frame):
+        self.requested = True
+        if not self.spinning:
+            raise KeyboardInterrupt
+
+
 def run_node(node_class, args=None, done=None) -> int:
     """The ``main`` of every executable: start the node (and its lifecycle, for a managed node
-    with ``autostart``), spin until Ctrl-C, an external shutdown or ``done(node)``, and exit 0.
-    A node that cannot start (bad parameter, missing or invalid file) logs one line and exits 1,
-    without a traceback."""
+    with ``autostart``), spin until Ctrl-C, SIGTERM, an external shutdown or ``done(node)``,
+    and exit 0. A node that cannot start (bad parameter, missing or invalid file) logs one line
+    and exits 1, without a traceback."""
     name = getattr(node_class, 'NODE_NAME', node_class.__name__)
+    interrupts = _Interrupts()
+    previous = {sig: signal.signal(sig, interrupts) for sig in (signal.SIGINT, signal.SIGTERM)}
     node = None
     try:
-        rclpy.init(args=args)
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
         node = node_class()
         if isinstance(node, ManagedNode) and not node.start():
             get_logger(name).fatal(f'refusing to start: {node.refusal}')
             return 1
-        if not rclpy.ok():      # Ctrl-C while starting up
-            return 0
-        spin_until_shutdown(node, None if done is None else (lambda: done(node)))
+        interrupts.spinning = True
+        if not interrupts.requested:
+            spin_until_shutdown(node, lambda: interrupts.requested or (
+                done is not None and done(node)))
         return 0
     except KeyboardInterrupt:
         return 0
@@ -141,6 +164,9 @@ def run_node(node_class, args=None, done=None) -> int:
         get_logger(name).fatal(f'refusing to start: {exc}')
         return 1
     finally:
+        interrupts.spinning = False
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
