@@ -25,7 +25,7 @@ def setup(tmp_path_factory):
     """48 box-assembly bags; a model trained (K = 3) on all but one interaction per pattern."""
     from mixture_ip_ros.io.dataset import load_demonstration
     from mixture_ip_ros.app.demo import demonstrated_target, split_held_out
-    from mixture_ip_ros.robot.kinematics import IiwaKinematics
+    from mixture_ip_ros.robot.kinematics import RobotKinematics
     from mixture_ip_ros.app.training import train_to_file
     root = tmp_path_factory.mktemp('closed_loop')
     data = root / 'bags'
@@ -34,7 +34,7 @@ def setup(tmp_path_factory):
     train, held = split_held_out(labels, 1, seed=3)
     model = root / 'model.npz'
     train_to_file([load_demonstration(data / n) for n in train], model, n_components=3)
-    kin = IiwaKinematics()
+    kin = RobotKinematics()
     targets = {n: demonstrated_target(data / n, kin)[0] for n in held}
     return {'data': data, 'labels': labels, 'held': held, 'model': model, 'targets': targets}
 
@@ -210,8 +210,8 @@ def test_cross_process_one_interaction(setup, tmp_path):
         spin_until(lambda: len(joints) > n + 150, 20)     # 1.5 s of simulated settling
         q = dict(zip(joints[-1].name, joints[-1].position))
         q = np.array([q[f'iiwa_joint_{i}'] for i in range(1, 8)])
-        from mixture_ip_ros.robot.kinematics import IiwaKinematics
-        hand = IiwaKinematics().fk(q)[0]
+        from mixture_ip_ros.robot.kinematics import RobotKinematics
+        hand = RobotKinematics().fk(q)[0]
         assert posterior, 'no posterior from estimator_node'
         assert np.linalg.norm(hand - setup['targets'][name]) < 0.03
         for p in procs[:3]:

@@ -12,8 +12,11 @@ from mixture_ip_ros.scenarios.human_motion import reach
 from mixture_ip_ros.io.records import InteractionRecord
 from mixture_ip_ros.viz import human_model as human
 from mixture_ip_ros.robot.description import JOINT_NAMES
-from mixture_ip_ros.robot.sim import HOME, IiwaSimulation
+from mixture_ip_ros.robot.description import DEFAULT
+from mixture_ip_ros.robot.sim import RobotSimulation
 from mixture_ip_ros.robot.trajectory import points_from_arrays
+
+HOME = DEFAULT.home_array()
 
 REST = np.array([1.05, 0.12, 0.18])
 GOAL = np.array([0.80, 0.02, 0.32])
@@ -25,7 +28,7 @@ def make_record(duration=2.0, onset=0.3, move=1.2, commit=0.7, robot_move=1.0, r
     """A handover replayed without ROS: the person reaches from REST to GOAL, the robot (the
     real simulation and controller at 1 kHz) moves its hand from HOME to ROBOT_HAND_GOAL after
     `commit`, and a made-up belief moves from uniform to 'plate'."""
-    sim = IiwaSimulation()
+    sim = RobotSimulation()
     q_goal = sim.kinematics.ik(ROBOT_HAND_GOAL, HOME)
     s = np.linspace(0.0, 1.0, 11)
     pos = HOME + np.outer(10 * s**3 - 15 * s**4 + 6 * s**5, q_goal - HOME)

@@ -6,9 +6,12 @@ import pytest
 
 from mixture_ip_ros.robot.controller import ComputedTorqueController, default_gains
 from mixture_ip_ros.robot.description import JOINT_NAMES
-from mixture_ip_ros.robot.kinematics import IiwaKinematics
-from mixture_ip_ros.robot.sim import HOME, IiwaSimulation
+from mixture_ip_ros.robot.kinematics import RobotKinematics
+from mixture_ip_ros.robot.description import DEFAULT
+from mixture_ip_ros.robot.sim import RobotSimulation
 from mixture_ip_ros.robot.trajectory import points_from_arrays
+
+HOME = DEFAULT.home_array()
 
 J = list(JOINT_NAMES)
 # Across the workspace: base swings 1.6 rad, shoulder and elbow open up, the wrist turns.
@@ -28,7 +31,7 @@ def minimum_jerk(q_a, q_b, duration, t):
 
 def run_tracking(mass_scale):
     """Track a 2 s minimum-jerk move sent as 21 points with velocities and accelerations."""
-    sim = IiwaSimulation(q0=Q_A, controller_mass_scale=mass_scale)
+    sim = RobotSimulation(q0=Q_A, controller_mass_scale=mass_scale)
     t_points = np.linspace(0.0, DURATION, 21)
     points = points_from_arrays(t_points, *minimum_jerk(Q_A, Q_B, DURATION, t_points))
     assert sim.set_trajectory(J, points) is None
@@ -62,7 +65,7 @@ def test_bounded_error_with_masses_ten_percent_too_high():
 
 
 def test_torques_never_exceed_the_limits():
-    sim = IiwaSimulation(q0=Q_A)
+    sim = RobotSimulation(q0=Q_A)
     # The same move in 0.3 s asks for far more torque than the motors have.
     t_points = np.linspace(0.0, 0.3, 7)
     points = points_from_arrays(t_points, *minimum_jerk(Q_A, Q_B, 0.3, t_points))
@@ -83,7 +86,7 @@ def test_torques_never_exceed_the_limits():
 
 def test_holds_still_under_gravity_without_a_trajectory():
     q0 = np.array([0.4, 1.1, -0.3, -0.9, 0.6, 1.2, -0.7])   # arm stretched out: big gravity load
-    sim = IiwaSimulation(q0=q0)
+    sim = RobotSimulation(q0=q0)
     sim.step(2000)
     np.testing.assert_allclose(sim.q, q0, atol=1e-6)
     np.testing.assert_allclose(sim.qd, 0.0, atol=1e-6)
@@ -98,13 +101,13 @@ def test_holds_still_under_gravity_without_a_trajectory():
 @pytest.fixture
 def controller():
     logged = []
-    ctrl = ComputedTorqueController(IiwaKinematics(), logger=logged.append)
+    ctrl = ComputedTorqueController(RobotKinematics(), logger=logged.append)
     ctrl.logged = logged
     return ctrl
 
 
 def _gravity(q):
-    model = IiwaSimulation(q0=q).model
+    model = RobotSimulation(q0=q).model
     data = mujoco.MjData(model)
     data.qpos[:] = q
     mujoco.mj_forward(model, data)
@@ -149,11 +152,11 @@ def test_hold_position_is_kept_when_the_arm_is_pushed_away(controller):
 
 
 def test_default_gains_are_critically_damped():
-    kp, kd = default_gains(60.0)
+    kp, kd = default_gains(60.0, 1.0, 7)
     np.testing.assert_allclose(kd, 2 * np.sqrt(kp))
     # Per joint, with another damping ratio.
-    kp, kd = default_gains(np.arange(1.0, 8.0), damping_ratio=0.7)
+    kp, kd = default_gains(np.arange(1.0, 8.0), 0.7, 7)
     np.testing.assert_allclose(kp, np.arange(1.0, 8.0) ** 2)
     np.testing.assert_allclose(kd, 1.4 * np.arange(1.0, 8.0))
     with pytest.raises(ValueError):
-        default_gains(-1.0)
+        default_gains(-1.0, 1.0, 7)

@@ -6,15 +6,18 @@ import mujoco
 import numpy as np
 import pytest
 
-from mixture_ip_ros.robot.kinematics import JOINT_NAMES, IiwaKinematics
-from mixture_ip_ros.robot.scene import (ACTUATOR_NAMES, FLANGE_SITE, HUMAN_WRIST, TABLE_TOP_Z,
+from mixture_ip_ros.robot.description import JOINT_NAMES
+from mixture_ip_ros.robot.kinematics import RobotKinematics
+from mixture_ip_ros.robot.scene import (actuator_names, FLANGE_SITE, HUMAN_WRIST, TABLE_TOP_Z,
                                         build_scene)
-from mixture_ip_ros.robot.sim import HOME
+from mixture_ip_ros.robot.description import DEFAULT
+
+HOME = DEFAULT.home_array()
 
 
 @pytest.fixture(scope='module')
 def kin():
-    return IiwaKinematics()
+    return RobotKinematics()
 
 
 @pytest.fixture(scope='module')
@@ -63,20 +66,20 @@ def test_pinocchio_and_mujoco_agree_at_100_random_configurations(kin, scene):
 
 
 def test_perturbed_model_scales_mass_matrix_and_gravity(kin):
-    heavy = IiwaKinematics(mass_scale=1.1)
+    heavy = RobotKinematics(mass_scale=1.1)
     q = HOME
     np.testing.assert_allclose(heavy.mass_matrix(q), 1.1 * kin.mass_matrix(q), rtol=1e-12,
                                atol=1e-12)
     np.testing.assert_allclose(heavy.gravity(q), 1.1 * kin.gravity(q), rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(heavy.fk(q)[0], kin.fk(q)[0])
     with pytest.raises(ValueError):
-        IiwaKinematics(mass_scale=0.0)
+        RobotKinematics(mass_scale=0.0)
 
 
 def test_scene_actuators_table_pole_and_wrist(scene):
     assert scene.opt.timestep == pytest.approx(0.001)
     assert scene.nq == 7 and scene.nu == 7
-    assert [scene.actuator(i).name for i in range(7)] == ACTUATOR_NAMES
+    assert [scene.actuator(i).name for i in range(7)] == actuator_names()
     np.testing.assert_allclose(scene.actuator_ctrlrange[:, 1], [320, 320, 176, 176, 110, 40, 40])
     np.testing.assert_allclose(scene.actuator_ctrlrange[:, 0], -scene.actuator_ctrlrange[:, 1])
     np.testing.assert_allclose(scene.actuator_gainprm[:, 0], 1.0)   # ctrl is torque in Nm

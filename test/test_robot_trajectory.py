@@ -4,9 +4,12 @@ import numpy as np
 import pytest
 
 from mixture_ip_ros.robot.description import JOINT_NAMES
-from mixture_ip_ros.robot.sim import HOME, IiwaSimulation
+from mixture_ip_ros.robot.description import DEFAULT
+from mixture_ip_ros.robot.sim import RobotSimulation
 from mixture_ip_ros.robot.trajectory import (JointTrajectory, TrajectoryFollower, TrajectoryPoint,
                                              points_from_arrays, validate_trajectory)
+
+HOME = DEFAULT.home_array()
 
 J = list(JOINT_NAMES)
 
@@ -210,7 +213,7 @@ def test_header_stamp_zero_starts_now():
 
 def test_simulation_counts_and_logs_rejections():
     logged = []
-    sim = IiwaSimulation(logger=logged.append)
+    sim = RobotSimulation(logger=logged.append)
     assert sim.set_trajectory(J[:6], _points(dof=6)) is not None
     assert sim.set_trajectory(J, []) is not None
     bad = _points()
@@ -226,7 +229,7 @@ def test_simulation_counts_and_logs_rejections():
 
 @pytest.mark.parametrize('open_loop', [False, True])
 def test_replacement_mid_trajectory_has_no_jump(open_loop):
-    sim = IiwaSimulation(open_loop_control=open_loop)
+    sim = RobotSimulation(open_loop_control=open_loop)
     q_a = HOME + np.array([0.6, 0.3, -0.4, 0.5, 0.3, -0.3, 0.8])
     t = np.linspace(0.0, 2.0, 11)
     s = t / 2.0

@@ -10,13 +10,13 @@ import pytest
 from mixture_ip_ros.scenarios import generated as S
 from mixture_ip_ros.io.bags import read_bag
 from mixture_ip_ros.io.dataset import load_dataset
-from mixture_ip_ros.robot.kinematics import IiwaKinematics
+from mixture_ip_ros.robot.kinematics import RobotKinematics
 from mixture_ip_ros.robot.scene import POLE_HEIGHT, POLE_RADIUS, POLE_XY
 
 
 @pytest.fixture(scope='module')
 def kin():
-    return IiwaKinematics()
+    return RobotKinematics()
 
 
 @pytest.fixture(scope='module')

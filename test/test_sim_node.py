@@ -24,8 +24,10 @@ from conftest import private_domain_id
 from mixture_ip_ros.nodes.sim_node import SimNode
 from mixture_ip_ros.core.share import config_path
 from mixture_ip_ros.robot.description import JOINT_NAMES
-from mixture_ip_ros.robot.kinematics import IiwaKinematics
-from mixture_ip_ros.robot.sim import HOME
+from mixture_ip_ros.robot.kinematics import RobotKinematics
+from mixture_ip_ros.robot.description import DEFAULT
+
+HOME = DEFAULT.home_array()
 
 RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 
@@ -99,7 +101,7 @@ def test_joint_states_converge_to_the_trajectory_end(harness):
     assert list(last.name) == list(JOINT_NAMES)
     np.testing.assert_allclose(last.position, goal, atol=1e-4)
     np.testing.assert_allclose(last.velocity, 0.0, atol=1e-3)
-    expected_flange = IiwaKinematics().fk(goal)[0]
+    expected_flange = RobotKinematics().fk(goal)[0]
     pose = harness.poses[-1].pose.position
     np.testing.assert_allclose([pose.x, pose.y, pose.z], expected_flange, atol=1e-3)
     assert harness.poses[-1].header.frame_id == 'iiwa_link_0'

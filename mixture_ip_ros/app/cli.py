@@ -10,14 +10,18 @@ from pathlib import Path
 def _generate(args):
     from mixture_ip_ros.scenarios.generated import write_scenario_bags
     bags = write_scenario_bags(args.scenario, Path(args.out), seed=args.seed,
-                               occlusion=args.occlusion, storage=args.storage)
-    print(f'wrote {len(bags)} {args.scenario} demonstrations ({args.storage} bags) to {args.out}')
+                               occlusion=args.occlusion, storage=args.storage, robot=args.robot)
+    print(f'wrote {len(bags)} {args.scenario} demonstrations ({args.storage} bags, '
+          f'{args.robot}) to {args.out}')
 
 
 def _train(args):
     from mixture_ip_ros.io.dataset import load_dataset
     from mixture_ip_ros.app.training import text_progress, train_to_file
-    demos, skipped = load_dataset(args.bag_dir, on_error=args.on_error)
+    from mixture_ip_ros.robot.description import load_description
+    robot = load_description(args.robot)
+    demos, skipped = load_dataset(args.bag_dir, on_error=args.on_error,
+                                  joint_names=robot.joint_names, transform=robot.world_to_base())
     for s in skipped:
         print(f'skipped {s.path}: {s.reason}', file=sys.stderr)
     kwargs = {'n_basis': args.n_basis, 'method': args.method}
@@ -26,7 +30,7 @@ def _train(args):
     else:
         kwargs['candidates'] = range(1, args.max_components + 1)
         kwargs['progress'] = text_progress()
-    model, info = train_to_file(demos, args.out, **kwargs)
+    model, info = train_to_file(demos, args.out, robot=robot, **kwargs)
     print(json.dumps({'model': str(args.out), **info}))
 
 
@@ -42,6 +46,13 @@ def _demo(args):
     run_demo(args)
 
 
+def _add_robot(parser):
+    from mixture_ip_ros.robot.description import DEFAULT_ROBOT, shipped_robots
+    parser.add_argument('--robot', default=DEFAULT_ROBOT,
+                        help=f'the arm: a shipped name ({", ".join(shipped_robots())}) or the path '
+                             f'of a robot description file (docs/robots.md); default {DEFAULT_ROBOT}')
+
+
 def build_parser():
     p = argparse.ArgumentParser(prog='mixture-ip', description=__doc__)
     sub = p.add_subparsers(dest='command', required=True)
@@ -53,6 +64,7 @@ def build_parser():
     g.add_argument('--occlusion', type=float, default=0.0,
                    help='probability that a demonstration has an occlusion gap in the wrist stream')
     g.add_argument('--storage', choices=['mcap', 'sqlite3'], default='mcap')
+    _add_robot(g)
     g.set_defaults(func=_generate)
 
     t = sub.add_parser('train', help='learn a Mixture of Interaction ProMPs from a folder of bags')
@@ -65,6 +77,7 @@ def build_parser():
     t.add_argument('--method', choices=['regression', 'em'], default='regression',
                    help="'em' learns from demonstrations with missing data (occlusions)")
     t.add_argument('--on-error', choices=['skip', 'raise'], default='skip')
+    _add_robot(t)
     t.set_defaults(func=_train)
 
     e = sub.add_parser('evaluate', help="reproduce the thesis's experiments: plots + metrics.json")
@@ -77,10 +90,14 @@ def build_parser():
                    help='evaluate on this folder of bags (with labels.json) instead of generating')
     e.set_defaults(func=_evaluate)
 
-    d = sub.add_parser('demo', help='closed loop: bags -> observer -> estimator -> MuJoCo iiwa')
-    d.add_argument('--data', default='out/box_assembly_bags',
-                   help='folder of demonstration bags (generated if missing)')
-    d.add_argument('--out', default='out/demo', help='model, plots and report go here')
+    d = sub.add_parser('demo', help='closed loop: bags -> observer -> estimator -> MuJoCo arm')
+    _add_robot(d)
+    d.add_argument('--data', default=None,
+                   help='folder of demonstration bags, generated if missing (default: '
+                        'out/box_assembly_bags for the iiwa14, out/<robot>/box_assembly_bags '
+                        'for another robot)')
+    d.add_argument('--out', default=None, help='model, plots and report go here (default: '
+                                               'out/demo, out/<robot>/demo for another robot)')
     d.add_argument('--json', default=None, help='also write the report as JSON here')
     d.add_argument('--render', default=None, help='write videos and contact sheets here')
     d.add_argument('--held-out', type=int, default=3, help='interactions replayed per pattern')

@@ -9,7 +9,7 @@ import numpy as np
 from mixture_ip_ros.core.mixture import (MixtureIProMP, loo_rms_by_components,
                                          select_n_components)
 from mixture_ip_ros.io.model_file import save_model
-from mixture_ip_ros.robot.description import JOINT_NAMES
+from mixture_ip_ros.robot.description import load_description
 
 logger = logging.getLogger(__name__)
 
@@ -72,9 +72,13 @@ def component_labels(model, demos):
     return out
 
 
-def train_to_file(demos, out_path, **kwargs):
+def train_to_file(demos, out_path, *, robot=None, **kwargs):
+    """Train and save; the controlled DOFs are ``robot``'s joints and the wrist is in its base
+    frame (a shipped name, a description file or a RobotDescription; None: the iiwa 14)."""
+    robot = load_description(robot)
     model, info = train(demos, **kwargs)
     save_model(Path(out_path), model, observed_names=OBSERVED_NAMES,
-               controlled_names=JOINT_NAMES, component_labels=component_labels(model, demos),
-               extra={'training': info})
+               controlled_names=robot.joint_names, observed_frame=robot.base_frame,
+               component_labels=component_labels(model, demos),
+               extra={'training': info, 'robot': robot.name})
     return model, info

@@ -48,7 +48,8 @@ from trajectory_msgs.msg import JointTrajectory
 
 from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.io.model_file import load_model
-from mixture_ip_ros.robot.description import JOINT_NAMES
+from mixture_ip_ros.robot.description import DEFAULT_ROBOT, load_description
+from mixture_ip_ros.robot.kinematics import RobotKinematics
 from mixture_ip_ros.nodes.cdr import JointTrajectoryEncoder, PathEncoder
 from mixture_ip_ros.nodes.spinning import spin_until_shutdown
 from mixture_ip_ros.estimation.planning import (
@@ -78,8 +79,12 @@ class EstimatorNode(Node):
         self.declare_parameter('trajectory_topic', '/iiwa/joint_trajectory')
         self.declare_parameter('path_topic', '/estimator/predicted_wrist')
         self.declare_parameter('posterior_topic', '/estimator/posterior')
-        self.declare_parameter('joint_names', list(JOINT_NAMES))
-        self.declare_parameter('observed_frame', 'iiwa_link_0')
+        # The robot (a shipped name or a description file) gives the defaults of joint_names,
+        # observed_frame (its base frame) and catch_up_velocity.
+        self.declare_parameter('robot', DEFAULT_ROBOT)
+        robot = load_description(self.get_parameter('robot').value)
+        self.declare_parameter('joint_names', list(robot.joint_names))
+        self.declare_parameter('observed_frame', robot.base_frame)
         self.declare_parameter('n_alpha', 50)
         self.declare_parameter('min_interval', 0.05)
         self.declare_parameter('confidence_threshold', 0.9)
@@ -90,8 +95,9 @@ class EstimatorNode(Node):
         self.declare_parameter('lookahead', 0.1)
         self.declare_parameter('settle_time', 0.5)
         self.declare_parameter('joint_state_topic', '/joint_states')
-        # Joint speeds the robot may use to catch up with a new plan: half the iiwa 14 limits.
-        self.declare_parameter('catch_up_velocity', [0.74, 0.74, 0.87, 0.65, 1.13, 1.18, 1.18])
+        # Joint speeds the robot may use to catch up with a new plan: half its velocity limits.
+        self.declare_parameter('catch_up_velocity',
+                               (0.5 * RobotKinematics(robot).velocity_limit).tolist())
         self.declare_parameter('diagnostics_period', 1.0)
         # Observations held outside an interaction, s of their stamps: well over the observer's
         # max_backdate, so that a back-dated onset (its event comes later) finds its samples.

@@ -28,6 +28,7 @@ from std_msgs.msg import Header
 
 from mixture_ip_ros.core.frames import FrameTransform
 from mixture_ip_ros.core.stamps import ns_to_parts, stamp_to_ns
+from mixture_ip_ros.robot.description import DEFAULT_ROBOT, load_description
 from mixture_ip_ros.estimation.pose_check import check_pose, POSE_REJECT_REASONS
 from mixture_ip_ros.core.segmentation import Event, MotionSegmenter
 from mixture_ip_ros.nodes.spinning import spin_until_shutdown
@@ -45,10 +46,15 @@ class ObserverNode(Node):
         self.declare_parameter('event_topic', '/observer/event')
         # Frame the mocap poses must carry ('' accepts any) and the frame published.
         self.declare_parameter('expected_frame', 'world')
-        self.declare_parameter('base_frame', 'iiwa_link_0')
+        # The robot (a shipped name or a description file) gives the defaults of base_frame and
+        # of the mocap-to-base transform (the inverse of its mount in the scene).
+        self.declare_parameter('robot', DEFAULT_ROBOT)
+        robot = load_description(self.get_parameter('robot').value)
+        mocap_to_base = robot.world_to_base()
+        self.declare_parameter('base_frame', robot.base_frame)
         # Mocap frame origin and orientation in the base frame: p_base = R p_mocap + t.
-        self.declare_parameter('mocap_to_base_xyz', [0.0, 0.0, 0.0])
-        self.declare_parameter('mocap_to_base_xyzw', [0.0, 0.0, 0.0, 1.0])
+        self.declare_parameter('mocap_to_base_xyz', mocap_to_base.translation.tolist())
+        self.declare_parameter('mocap_to_base_xyzw', list(mocap_to_base.quaternion))
         self.declare_parameter('quaternion_tolerance', 0.01)
         for name, default in SEGMENTER_DEFAULTS.items():
             self.declare_parameter(name, default)

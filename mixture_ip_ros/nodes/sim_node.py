@@ -1,4 +1,8 @@
-"""sim_node: the MuJoCo iiwa 14 with computed-torque control, as a ROS 2 node.
+"""sim_node: a MuJoCo arm (the iiwa 14 by default) with computed-torque control, as a ROS 2 node.
+
+The arm is the parameter ``robot``: a shipped robot's name (config/robots/) or the path of a
+robot description file; its description gives the defaults of initial_positions, the gains and
+base_frame.
 
 Subscribes iiwa/joint_trajectory (trajectory_msgs/JointTrajectory, reliable); publishes
 joint_states (sensor_msgs/JointState), iiwa/flange_pose (geometry_msgs/PoseStamped) and, in
@@ -26,8 +30,8 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
-from mixture_ip_ros.robot.controller import DEFAULT_NATURAL_FREQUENCY
-from mixture_ip_ros.robot.sim import HOME, IiwaSimulation
+from mixture_ip_ros.robot.description import DEFAULT_ROBOT, load_description
+from mixture_ip_ros.robot.sim import RobotSimulation
 from mixture_ip_ros.robot.trajectory import TrajectoryPoint
 from mixture_ip_ros.nodes.spinning import spin_until_shutdown
 
@@ -45,20 +49,23 @@ class SimNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('sim_node', **kwargs)
+        self.declare_parameter('robot', DEFAULT_ROBOT)
+        description = load_description(self.get_parameter('robot').value)
+        frequency, damping = description.gains()
         self.declare_parameter('simulated_time', True)
         self.declare_parameter('real_time_factor', 1.0)
         self.declare_parameter('publish_rate', 100.0)
         self.declare_parameter('periods_per_callback', 1)
-        self.declare_parameter('initial_positions', HOME.tolist())
-        self.declare_parameter('natural_frequency', [DEFAULT_NATURAL_FREQUENCY] * 7)
-        self.declare_parameter('damping_ratio', [1.0] * 7)
+        self.declare_parameter('initial_positions', list(description.home))
+        self.declare_parameter('natural_frequency', frequency.tolist())
+        self.declare_parameter('damping_ratio', damping.tolist())
         self.declare_parameter('controller_mass_scale', 1.0)
         self.declare_parameter('allow_partial_joints_goal', False)
         self.declare_parameter('allow_nonzero_velocity_at_trajectory_end', False)
         self.declare_parameter('open_loop_control', False)
         self.declare_parameter('pole', False)
         self.declare_parameter('stands', True)
-        self.declare_parameter('base_frame', 'iiwa_link_0')
+        self.declare_parameter('base_frame', description.base_frame)
         self.declare_parameter('max_catch_up', 0.1)
 
         param = self.get_parameter
@@ -75,8 +82,8 @@ class SimNode(Node):
             raise ValueError('periods_per_callback must be >= 1')
         self.max_catch_up = float(param('max_catch_up').value)
 
-        self.sim = IiwaSimulation(
-            q0=np.asarray(param('initial_positions').value, dtype=float),
+        self.sim = RobotSimulation(
+            robot=description, q0=np.asarray(param('initial_positions').value, dtype=float),
             pole=bool(param('pole').value), stands=bool(param('stands').value),
             natural_frequency=np.asarray(param('natural_frequency').value, dtype=float),
             damping_ratio=np.asarray(param('damping_ratio').value, dtype=float),
@@ -119,8 +126,8 @@ class SimNode(Node):
             pace = f'simulated time, real-time factor {self.real_time_factor or "unlimited"}'
         else:
             pace = 'wall-clock time'
-        self.get_logger().info(f'iiwa sim: dt {self.sim.dt * 1e3:.1f} ms, publishing every '
-                               f'{self.publish_period * 1e3:.0f} ms of {pace}')
+        self.get_logger().info(f'{description.name} sim: dt {self.sim.dt * 1e3:.1f} ms, '
+                               f'publishing every {self.publish_period * 1e3:.0f} ms of {pace}')
 
     @property
     def rejection_count(self) -> int:
@@ -184,9 +191,9 @@ class SimNode(Node):
         data = self.sim.data
         js = self._joint_state_msg
         js.header.stamp = stamp
-        js.position = data.qpos[:7].tolist()
-        js.velocity = data.qvel[:7].tolist()
-        js.effort = data.ctrl[:7].tolist()
+        js.position = data.qpos.tolist()
+        js.velocity = data.qvel.tolist()
+        js.effort = data.ctrl.tolist()
         self.joint_state_pub.publish(js)
         pos, quat = self.sim.flange_pose()
         pose = self._pose_msg

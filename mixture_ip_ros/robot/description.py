@@ -59,7 +59,7 @@ def rpy_quaternion(rpy) -> tuple:
             cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy)
 
 
-def _package_share(package: str) -> Path | None:
+def package_share(package: str) -> Path | None:
     """The share folder of a ROS-style package: this package's own, then the prefixes a pip or
     ROS install uses (cmeel.prefix/share inside site-packages, sys.prefix/share,
     AMENT_PREFIX_PATH and CMAKE_PREFIX_PATH entries, ROS_PACKAGE_PATH folders)."""
@@ -81,7 +81,7 @@ def resolve_uri(uri: str, relative_to: Path | None = None) -> Path:
     uri = str(uri)
     if uri.startswith('package://'):
         package, _, rest = uri[len('package://'):].partition('/')
-        share = _package_share(package)
+        share = package_share(package)
         if share is None:
             raise FileNotFoundError(f'{uri}: package {package!r} not found (looked in '
                                     'site-packages/cmeel.prefix/share, sys.prefix/share, '
@@ -107,7 +107,7 @@ class RobotDescription:
     """
 
     name: str
-    source: str                          # the shipped name or the file it was loaded from
+    source: str         # what load_description takes back: a shipped name or an absolute path
     model_path: Path
     joint_names: tuple
     base_frame: str
@@ -186,7 +186,8 @@ def load_description(robot=None) -> RobotDescription:
         return robot
     robot = DEFAULT_ROBOT if robot is None else robot
     path = description_file(robot).resolve()
-    return _load(str(path), path.stat().st_mtime_ns, str(robot))
+    shipped = path.parent == config_path(ROBOTS_DIR).resolve()
+    return _load(str(path), path.stat().st_mtime_ns, path.stem if shipped else str(path))
 
 
 @functools.lru_cache(maxsize=32)
