@@ -98,6 +98,7 @@ LIFT_FRACTION = 0.15        # of the movement spent lifting (the deterministic p
 BOX_DURATION = {'plate': (2.0, 3.4), 'screw': (1.7, 2.8), 'screwdriver': (1.2, 2.1)}
 BOX_COUNTS = {'plate': 15, 'screw': 20, 'screwdriver': 13}
 MAX_ATTEMPTS = 50            # per demonstration (box) or spot (pole) before giving up
+TABLE_CLEARANCE = 0.01       # m the arm (past its shoulder) keeps above the table top (z = 0)
 
 # Pole geometry.
 WAND_OFFSET = np.array([0.22, 0.0, 0.14])     # wrist end - pointed spot
@@ -112,6 +113,8 @@ POLE_POINT_TILT = (0.25, 0.6)  # pointing axis (x, side) components per unit dow
 POLE_DURATION = (2.6, 4.6)
 POLE_MARGIN = 0.015
 POLE_VIA_FRACTION = 0.4
+APPROACH = 0.1               # m back along the pointing axis: the posture above the spot ...
+APPROACH_FRACTION = 0.9      # ... passed at this fraction of the movement, when one is needed
 
 BOX_LABELS = ('plate', 'screw', 'screwdriver')
 POLE_LABELS = ('left', 'right')
@@ -246,6 +249,11 @@ class _Arm:
     def base(self, p_world) -> np.ndarray:
         return self._to_base.apply_array(np.asarray(p_world, dtype=float))
 
+    @property
+    def tool_axis(self) -> np.ndarray:
+        """The tool's approach axis in the flange frame."""
+        return self._tool.T[:, 2]
+
     def flange(self, R_tool_base) -> np.ndarray:
         """Flange orientation (base frame) for a tool orientation given in the base frame."""
         return R_tool_base @ self._tool
@@ -271,9 +279,14 @@ class _Arm:
         return self._to_world.apply_array(self.kin.frame_positions(q, self.clearance_frames))
 
     def feasible(self, q, qd) -> bool:
+        """A joint path (samples, dof) within the position and velocity limits, with the arm
+        (its clearance polyline after the first point, every 5th sample) above the table."""
         kin = self.kin
-        return bool(check_velocity_limits(kin, qd) and np.all(q >= kin.lower)
-                    and np.all(q <= kin.upper))
+        if not (check_velocity_limits(kin, qd) and np.all(q >= kin.lower)
+                and np.all(q <= kin.upper)):
+            return False
+        lowest = min(self.link_points(x)[1:, 2].min(initial=np.inf) for x in q[::5])
+        return bool(lowest > TABLE_CLEARANCE)
 
 
 ROTATION_TOL = 0.2  # rad; a handover or pointing only needs the gripper roughly facing its target
@@ -574,14 +587,25 @@ def _pole_demo(arm, postures, rng, side, spot, name, occlusion, noise, clearance
             q_end = _ik(kin, flange, _clear_the_pole(arm, q_end, clearance + 0.03, steps=100), R)
     except ValueError:
         return None
-    knots = np.vstack([arm.pole_home, q_via, q_end])
+    knots = [arm.pole_home, q_via, q_end]
+    fractions = [0.0, POLE_VIA_FRACTION, 1.0]
+    unit = np.linspace(0.0, 1.0, 400)
+    q_unit, qd_unit = quintic_path(unit, fractions, knots)
+    if min(arm.link_points(x)[1:, 2].min(initial=np.inf) for x in q_unit[::10]) <= TABLE_CLEARANCE:
+        # The joint-space path from the via posture swings the hand through the table (it does
+        # for the Panda's long hand): come down to the spot from a posture above it instead.
+        try:
+            q_above = _ik(kin, flange - APPROACH * (R @ arm.tool_axis), q_end, R)
+        except ValueError:
+            return None
+        knots.insert(2, q_above)
+        fractions.insert(2, APPROACH_FRACTION)
+        q_unit, qd_unit = quintic_path(unit, fractions, knots)
     # The fastest the arm can follow this path: joint speeds scale with 1 / duration.
-    _, qd_unit = quintic_path(np.linspace(0.0, 1.0, 400), [0.0, POLE_VIA_FRACTION, 1.0], knots)
     fastest = float(np.max(np.abs(qd_unit) / kin.velocity_limit))
     duration = max(drawn, 1.03 * fastest)
     onset, end, wrist_t, joint_t = _recording_times(rng, duration)
-    times = [onset, onset + POLE_VIA_FRACTION * duration, end]
-    q, qd = quintic_path(joint_t, times, knots)
+    q, qd = quintic_path(joint_t, [onset + f * duration for f in fractions], knots)
     if not arm.feasible(q, qd) or _path_clearance(arm, q) < clearance:
         return None
     xyz, via, skew = _human_wrist(rng, wrist_t, onset, duration, start, goal,
