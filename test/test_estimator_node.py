@@ -410,8 +410,14 @@ def test_config_file_declares_the_defaults(ros_context, trained):
     from_file = parameters(cli_args=['--ros-args', '--params-file', str(path)])
     defaults = parameters()
     expected = {k: v for k, v in values.items() if k != 'model_path'}
-    assert set(defaults) == set(expected)
-    for name, value in expected.items():
+    # Not written in the file: the robot's description gives them (the file says so).
+    from mixture_ip_ros.robot.kinematics import RobotKinematics
+    robot = RobotKinematics(values['robot'])
+    derived = {'joint_names': list(robot.joint_names),
+               'observed_frame': robot.description.base_frame,
+               'catch_up_velocity': (0.5 * robot.velocity_limit).tolist()}
+    assert set(defaults) == set(expected) | set(derived)
+    for name, value in {**expected, **derived}.items():
         for got in (from_file[name], defaults[name]):
             assert (list(got) if isinstance(value, list) else got) == value, name
 

@@ -290,6 +290,9 @@ class _Arm:
 
 
 ROTATION_TOL = 0.2  # rad; a handover or pointing only needs the gripper roughly facing its target
+# rad demonstrated postures keep from every joint limit: a prediction around them then stays
+# inside the limits (MuJoCo stops a joint at its limit; the controller's model does not know it).
+LIMIT_MARGIN = 0.1
 
 
 def _ik(kin, position, q0, rotation, tol=2e-3):
@@ -297,7 +300,8 @@ def _ik(kin, position, q0, rotation, tol=2e-3):
     # Tight position, soft orientation (within ROTATION_TOL), no random restarts: a restart could
     # land in another arm configuration and break the consistency of a pattern's postures.
     return kin.ik(np.asarray(position, dtype=float), q0, rotation=rotation, tol=tol,
-                  orientation_weight=0.3, rotation_tol=ROTATION_TOL, restarts=0)
+                  orientation_weight=0.3, rotation_tol=ROTATION_TOL, restarts=0,
+                  limit_margin=LIMIT_MARGIN)
 
 
 def _ik_turning(kin, position, q0, R_from, R_to, steps: int = 6):
