@@ -49,8 +49,9 @@ def _demo(args):
 def _add_robot(parser):
     from mixture_ip_ros.robot.description import DEFAULT_ROBOT, shipped_robots
     parser.add_argument('--robot', default=DEFAULT_ROBOT,
-                        help=f'the arm: a shipped name ({", ".join(shipped_robots())}) or the path '
-                             f'of a robot description file (docs/robots.md); default {DEFAULT_ROBOT}')
+                        help=f'the arm: a shipped name ({", ".join(shipped_robots())}) or the '
+                             'path of a robot description file (docs/robots.md); default '
+                             f'{DEFAULT_ROBOT}')
 
 
 def build_parser():

@@ -126,8 +126,8 @@ class GeneratedDemo:
 
     Times are seconds since the recording start. ``wrist_xyz`` and ``wrist_goal`` are in the
     scene's world frame (the mocap frame), NaN rows are occluded (not written to a bag);
-    ``joint_*`` and ``flange_goal`` are the robot's (``robot``), in its base frame. ``onset``/``end``
-    are the true movement interval.
+    ``joint_*`` and ``flange_goal`` are the robot's (``robot``), in its base frame.
+    ``onset``/``end`` are the true movement interval.
     """
 
     name: str
@@ -712,7 +712,8 @@ def write_scenario_bags(scenario: str, out_dir, seed: int = 0, occlusion: float 
         demos = generate(scenario, seed, robot=robot, occlusion=occlusion)
     robots = {d.robot.name for d in demos}
     if len(robots) != 1:
-        raise ValueError(f'demonstrations of several robots {sorted(robots)}; one folder, one robot')
+        raise ValueError(f'demonstrations of several robots {sorted(robots)}; one folder, '
+                         'one robot')
     out.mkdir(parents=True, exist_ok=True)
     paths = []
     for d in demos:
