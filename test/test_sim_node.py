@@ -115,6 +115,35 @@ def test_joint_states_converge_to_the_trajectory_end(harness):
     assert harness.sim_node.rejection_count == 0
 
 
+def test_the_robot_parameter_makes_it_another_arm(ros_context):
+    """robot:=ur5 and nothing else: six joints at the UR5's home, its frame on the flange pose
+    (in its base frame, 10 cm from the scene's origin), and its trajectories executed."""
+    from mixture_ip_ros.robot.description import load_description
+    ur5 = load_description('ur5')
+    h = Harness(ros_context, robot='ur5')
+    try:
+        sim = h.sim_node.sim
+        h.spin_until(lambda: h.pub.get_subscription_count() > 0 and h.joint_states)
+        assert list(h.joint_states[-1].name) == list(ur5.joint_names)
+        np.testing.assert_allclose(h.joint_states[-1].position, ur5.home, atol=1e-6)
+        assert list(h.sim_node.get_parameter('natural_frequency').value) == [60.0] * 6
+        goal = np.array(ur5.home) + np.array([0.3, -0.2, 0.25, 0.3, -0.3, 0.2])
+        h.pub.publish(_trajectory(HOME, 1.0))                       # the iiwa's: refused
+        h.pub.publish(_trajectory(goal, 1.0, names=ur5.joint_names))
+        h.spin_until(lambda: sim.accepted_count == 1 and h.sim_node.rejection_count == 1)
+        sent_at = sim.time
+        h.spin_until(lambda: sim.time > sent_at + 2.0)
+        h.spin_until(lambda: len(h.poses) > 1 and h.poses[-1].header.stamp.sec >= int(sim.time))
+        np.testing.assert_allclose(h.joint_states[-1].position, goal, atol=1e-4)
+        pose = h.poses[-1]
+        assert pose.header.frame_id == 'base_link'
+        np.testing.assert_allclose([pose.pose.position.x, pose.pose.position.y,
+                                    pose.pose.position.z], RobotKinematics('ur5').fk(goal)[0],
+                                   atol=1e-3)
+    finally:
+        h.close()
+
+
 def test_bad_trajectories_are_rejected_and_counted(harness):
     sim = harness.sim_node.sim
     harness.spin_until(lambda: harness.pub.get_subscription_count() > 0 and harness.joint_states)
@@ -141,10 +170,16 @@ def test_params_file_is_the_node_parameters():
         node = SimNode(context=ctx)
         builtin = {'use_sim_time', 'start_type_description_service'}
         declared = set(node._parameters) - builtin
-        assert declared == set(values)
-        for name, value in values.items():
+        # Not written in the file: the robot's description gives them (the file says so).
+        from mixture_ip_ros.robot.description import load_description
+        robot = load_description(values['robot'])
+        frequency, damping = robot.gains()
+        derived = {'initial_positions': list(robot.home), 'natural_frequency': frequency.tolist(),
+                   'damping_ratio': damping.tolist(), 'base_frame': robot.base_frame}
+        assert declared == set(values) | set(derived)
+        for name, value in {**values, **derived}.items():
             assert node.get_parameter(name).value == pytest.approx(value)
-        np.testing.assert_allclose(node.sim.q, values['initial_positions'])
+        np.testing.assert_allclose(node.sim.q, robot.home)
         assert node.steps_per_publish == round(1000 / values['publish_rate'])
         node.destroy_node()
     finally:
@@ -198,7 +233,7 @@ def test_ctrl_c_while_simulating_flat_out_exits_cleanly():
         out = b''
         try:
             deadline = time.monotonic() + 20
-            while b'iiwa sim' not in out and time.monotonic() < deadline:   # started up
+            while b' sim: dt' not in out and time.monotonic() < deadline:   # started up
                 out += proc.stdout.readline()
             time.sleep(1.0)
             proc.send_signal(signal.SIGINT)
