@@ -212,12 +212,12 @@ def test_mixture_rejects_bad_input(three_patterns):
 
 
 def test_a_component_left_empty_keeps_a_finite_phase_prior():
-    """K = 8 on 47 box-assembly demonstrations: EM empties a component (0 / 0 gave NaN priors
+    """K = 10 on 47 box-assembly demonstrations: EM empties a component (0 / 0 gave NaN priors
     and an all-NaN online posterior)."""
     from mixture_ip_ros.core.online import OnlineEstimator
     from mixture_ip_ros.scenarios.generated import box_assembly
     demos = [g.to_demonstration(0.01) for g in box_assembly(0, occlusion=0.5)]
-    m = MixtureIProMP(8).fit(demos[:1] + demos[2:])
+    m = MixtureIProMP(10).fit(demos[:1] + demos[2:])
     empty = m.resp_.sum(axis=0) < 1e-12
     assert empty.any()
     alphas = np.array([1.0 / d.duration for d in demos[:1] + demos[2:]])

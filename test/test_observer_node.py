@@ -229,8 +229,15 @@ def test_params_file_matches_declared_defaults(ros_context):
     try:
         declared = {n: p.value for n, p in node.get_parameters_by_prefix('').items()
                     if n not in ('use_sim_time', 'start_type_description_service')}
-        assert set(params) == set(declared)  # every setting documented, none unknown
-        for name, value in params.items():
+        # Not written in the file: the robot's description gives them (the file says so).
+        from mixture_ip_ros.robot.description import load_description
+        robot = load_description(params['robot'])
+        to_base = robot.world_to_base()
+        derived = {'base_frame': robot.base_frame,
+                   'mocap_to_base_xyz': to_base.translation.tolist(),
+                   'mocap_to_base_xyzw': list(to_base.quaternion)}
+        assert set(params) | set(derived) == set(declared)  # every setting documented
+        for name, value in {**params, **derived}.items():
             got = declared[name]
             assert (list(got) if isinstance(value, list) else got) == value, name
     finally:
