@@ -18,10 +18,11 @@ from conftest import private_domain_id
 from mixture_ip_ros.scenarios.generated import read_labels, write_scenario_bags
 
 pytestmark = pytest.mark.filterwarnings('ignore::DeprecationWarning')
-# Where the hand must end (m from the demonstrated target). The screw's handover place is the
-# teacher's, uncorrelated with the human (8 mm of noise per axis), and the wrist still moves its
-# prediction: leave-one-out errors of 0.4-5.4 cm (mean 2.8 cm) on the iiwa's seed-3 set.
-HAND_BOUND = {'plate': 0.03, 'screwdriver': 0.03, 'screw': 0.035}
+# Where the hand must end (m from the demonstrated target): the model's own error plus 0.5-0.7 cm
+# for the online loop. The model, from the whole wrist path with the phase known, puts the
+# hand of the iiwa's held-out plate, screwdriver and screw 2.8, 2.8 and 3.3 cm from their targets
+# (the screw's place is the teacher's, uncorrelated with the human: 8 mm of noise per axis).
+HAND_BOUND = {'plate': 0.035, 'screwdriver': 0.035, 'screw': 0.04}
 
 
 @pytest.fixture(scope='module')
