@@ -1,7 +1,7 @@
 """Benchmark of the iiwa simulation with the computed-torque controller in the loop.
 
 Prints one JSON object:
-  realtime_factor      simulated s per wall s of IiwaSimulation.step at 1 kHz (median of runs)
+  realtime_factor      simulated s per wall s of RobotSimulation.step at 1 kHz (median of runs)
   step_us_total        wall microseconds per 1 ms control step (from the same runs)
   step_us_mujoco       of which mj_step
   step_us_pinocchio    of which the controller (Pinocchio RNEA + the control law around it)
@@ -35,7 +35,7 @@ import numpy as np  # noqa: E402
 import pinocchio  # noqa: E402
 
 from mixture_ip_ros.robot.description import JOINT_NAMES  # noqa: E402
-from mixture_ip_ros.robot.sim import IiwaSimulation  # noqa: E402
+from mixture_ip_ros.robot.sim import RobotSimulation  # noqa: E402
 from mixture_ip_ros.robot.trajectory import points_from_arrays  # noqa: E402
 
 Q_A = np.array([-0.8, 0.3, 0.5, -1.6, -0.4, 0.8, -0.5])
@@ -53,7 +53,7 @@ def _min_jerk_points(q_a, q_b, duration, n=21):
 
 
 def bench_library(runs: int, seconds: float):
-    sim = IiwaSimulation(q0=Q_A)
+    sim = RobotSimulation(q0=Q_A)
     n = int(round(seconds / sim.dt))
     factors = []
     for run in range(runs):
@@ -64,7 +64,7 @@ def bench_library(runs: int, seconds: float):
         sim.step(n)
         factors.append(seconds / (time.perf_counter() - start))
 
-    # The same loop as IiwaSimulation.step, with a stopwatch around each part.
+    # The same loop as RobotSimulation.step, with a stopwatch around each part.
     sim.set_state(Q_A)
     sim.set_trajectory(JOINT_NAMES, _min_jerk_points(Q_A, Q_B, seconds))
     model, data = sim.model, sim.data

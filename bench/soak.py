@@ -208,8 +208,8 @@ def main():
                     p.kill()
                 log.close()
 
-    from mixture_ip_ros.robot.kinematics import IiwaKinematics
-    kin = IiwaKinematics()
+    from mixture_ip_ros.robot.kinematics import RobotKinematics
+    kin = RobotKinematics()
     # A commitment is the first plan after an onset (a new interaction), classified by the
     # stream window its trigger stamp falls in; the plans that continue a commitment into the
     # next window are counted apart (the robot finishing the reach it was committed to).

@@ -12,7 +12,7 @@ from mixture_ip_ros.core.mixture import (MixtureIProMP, gmm_maximization, gmm_re
                                          kmeans, loo_rms_by_components, select_n_components)
 from mixture_ip_ros.core.promp import ProMP
 
-from mixture_ip_ros.scenarios.synthetic import mixture_demos, random_spd, sample_trajectory
+from mixture_ip_ros.scenarios.synthetic import mixture_demos, random_spd
 
 
 @pytest.fixture(scope='module')
@@ -216,12 +216,12 @@ def test_mixture_rejects_bad_input(three_patterns):
 
 
 def test_a_component_left_empty_keeps_a_finite_phase_prior():
-    """K = 8 on 47 box-assembly demonstrations with a broad covariance floor: EM empties a
+    """K = 10 on 47 box-assembly demonstrations with a broad covariance floor: EM empties a
     component (0 / 0 gave NaN priors and an all-NaN online posterior)."""
     from mixture_ip_ros.core.online import OnlineEstimator
     from mixture_ip_ros.scenarios.generated import box_assembly
     demos = [g.to_demonstration(0.01) for g in box_assembly(0, occlusion=0.5)]
-    m = MixtureIProMP(8, prior_scale=0.3).fit(demos[:1] + demos[2:])
+    m = MixtureIProMP(10, prior_scale=0.3).fit(demos[:1] + demos[2:])
     empty = m.resp_.sum(axis=0) < 1e-12
     assert empty.any()
     alphas = np.array([1.0 / d.duration for d in demos[:1] + demos[2:]])

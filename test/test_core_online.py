@@ -203,7 +203,7 @@ def test_final_posture_conditions_on_the_final_position_at_phase_one(model_and_d
     y = demos[7].observed[-1]
     k = 1
     mean, cov = est.predict_at_rest(y, component=k)
-    N, P = model.n_basis, model.n_observed_
+    P = model.n_observed_
     D = P + model.n_controlled_
     A = np.kron(np.eye(D), model.basis_([1.0]))             # every DOF at z = 1
     mu, C = A @ model.means_[k], A @ model.covariances_[k] @ A.T

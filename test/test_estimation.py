@@ -732,8 +732,8 @@ def test_a_stream_on_another_clock_is_dropped_with_one_warning():
 
 def _iiwa_limits(acceleration=20.0):
     from mixture_ip_ros.estimation.plans import JointLimits
-    from mixture_ip_ros.robot.kinematics import IiwaKinematics
-    k = IiwaKinematics()
+    from mixture_ip_ros.robot.kinematics import RobotKinematics
+    k = RobotKinematics()
     return JointLimits(k.lower, k.upper, k.velocity_limit, np.full(7, acceleration))
 
 

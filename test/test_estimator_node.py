@@ -231,7 +231,7 @@ def test_interaction_commits_then_replans_and_ends_with_a_final_plan(estimator, 
 
 
 def test_markers_show_every_component_and_the_planned_hand(estimator, trained):
-    from mixture_ip_ros.robot.kinematics import IiwaKinematics
+    from mixture_ip_ros.robot.kinematics import RobotKinematics
     model_path, held = trained
     demo = held[1]
     e = estimator(**MANUAL, marker_rate_hz=1000.0)
@@ -257,7 +257,7 @@ def test_markers_show_every_component_and_the_planned_hand(estimator, trained):
     hand = [m for m in markers if m.ns == 'planned_hand'][0]
     q = np.array([pt.positions for pt in traj.points])
     np.testing.assert_allclose([[v.x, v.y, v.z] for v in hand.points],
-                               IiwaKinematics().fk_positions(q), atol=1e-9)
+                               RobotKinematics().fk_positions(q), atol=1e-9)
 
 
 def test_timers_replan_and_publish_diagnostics(estimator, trained):

@@ -4,16 +4,18 @@ are checked against it, and the nodes load those files as they are."""
 from pathlib import Path
 import re
 
+import numpy as np
 import pytest
 import yaml
 from rclpy.parameter import Parameter
 
 from mixture_ip_ros.core.share import config_path
 from mixture_ip_ros.nodes.bag_player import BagPlayerParameters
-from mixture_ip_ros.nodes.estimator_node import EstimatorParameters
+from mixture_ip_ros.nodes.estimator_node import EstimatorNode, EstimatorParameters
 from mixture_ip_ros.nodes.observer_node import ObserverNode, ObserverParameters
 from mixture_ip_ros.nodes.params import check_params_file, markdown_table, specs
 from mixture_ip_ros.nodes.sim_node import SimNode, SimParameters
+from mixture_ip_ros.robot.description import DEFAULT_ROBOT, load_description, shipped_robots
 
 README = Path(__file__).resolve().parents[1] / 'README.md'
 NODES = {'estimator_node': ('estimator.yaml', EstimatorParameters),
@@ -52,6 +54,52 @@ def test_nodes_load_their_config_file(ros_context, node_class, node):
             assert n.get_parameter(name).value == value, name
     finally:
         n.destroy_node()
+
+
+@pytest.mark.parametrize('node_class', [EstimatorNode, ObserverNode, SimNode])
+def test_the_robot_parameter_gives_the_defaults_of_its_fields(ros_context, node_class):
+    """Each shipped robot's description (read independently here) gives the node's from_robot
+    fields; the schema's defaults are the default robot's; a value given explicitly wins."""
+    from mixture_ip_ros.robot.kinematics import RobotKinematics
+    schema = {n: (d, s) for n, d, s in specs(node_class.SCHEMA)}
+    derived = sorted(n for n, (_, s) in schema.items() if s.from_robot)
+    assert derived and list(schema).index('robot') < min(list(schema).index(n) for n in derived)
+
+    def independent(robot):
+        d = load_description(robot)
+        to_base = d.world_to_base()
+        velocity = RobotKinematics(robot).velocity_limit
+        return {'joint_names': list(d.joint_names), 'observed_frame': d.base_frame,
+                'base_frame': d.base_frame, 'catch_up_velocity': list(0.5 * velocity),
+                'initial_positions': list(d.home), 'natural_frequency': list(d.gains()[0]),
+                'damping_ratio': list(d.gains()[1]),
+                'mocap_to_base_xyz': list(to_base.translation),
+                'mocap_to_base_xyzw': list(to_base.quaternion)}
+
+    def same(a, b):
+        if isinstance(b, str) or (isinstance(b, list) and isinstance(b[0], str)):
+            return list(a) == b if isinstance(b, list) else a == b
+        return np.allclose(a, b, rtol=1e-12, atol=1e-12)
+
+    for n in derived:
+        assert same(schema[n][0], independent(DEFAULT_ROBOT)[n]), n
+    assert len(shipped_robots()) >= 3
+    for robot in shipped_robots():
+        node = node_class(context=ros_context, parameter_overrides=[
+            Parameter('robot', value=robot), Parameter(derived[0], value=schema[derived[0]][0])])
+        try:
+            got = {n: node.get_parameter(n).value for n in derived}
+        finally:
+            node.destroy_node()
+        expected = {n: independent(robot)[n] for n in derived}
+        expected[derived[0]] = schema[derived[0]][0]               # given explicitly
+        for n in derived:
+            assert same(got[n], expected[n]), (robot, n)
+
+
+def test_an_unknown_robot_is_refused_naming_the_parameter(ros_context):
+    with pytest.raises(ValueError, match='parameter robot: .*no_such_arm'):
+        SimNode(context=ros_context, parameter_overrides=[Parameter('robot', value='no_such_arm')])
 
 
 def test_the_readme_tables_are_the_schemas():

@@ -1,7 +1,5 @@
 """Offscreen rendering of a recorded interaction (real MuJoCo through OSMesa, real simulation)."""
 
-import copy
-
 import mujoco
 import numpy as np
 import pytest
@@ -11,8 +9,8 @@ from mixture_ip_ros.viz import render
 from mixture_ip_ros.scenarios.human_motion import reach
 from mixture_ip_ros.io.records import InteractionRecord
 from mixture_ip_ros.viz import human_model as human
-from mixture_ip_ros.robot.description import JOINT_NAMES
-from mixture_ip_ros.robot.sim import HOME, IiwaSimulation
+from mixture_ip_ros.robot.description import shipped_robots
+from mixture_ip_ros.robot.sim import RobotSimulation
 from mixture_ip_ros.robot.trajectory import points_from_arrays
 
 REST = np.array([1.05, 0.12, 0.18])
@@ -21,12 +19,15 @@ ROBOT_HAND_GOAL = np.array([0.70, 0.02, 0.32])
 
 
 def make_record(duration=2.0, onset=0.3, move=1.2, commit=0.7, robot_move=1.0, rate=100.0,
-                gap=(0.9, 1.1)):
+                gap=(0.9, 1.1), robot=None):
     """A handover replayed without ROS: the person reaches from REST to GOAL, the robot (the
-    real simulation and controller at 1 kHz) moves its hand from HOME to ROBOT_HAND_GOAL after
-    `commit`, and a made-up belief moves from uniform to 'plate'."""
-    sim = IiwaSimulation()
-    q_goal = sim.kinematics.ik(ROBOT_HAND_GOAL, HOME)
+    real simulation and controller at 1 kHz) moves its hand from its home posture to
+    ROBOT_HAND_GOAL after `commit`, and a made-up belief moves from uniform to 'plate'.
+    Positions in the scene's world frame here, in the record in the robot's base frame."""
+    sim = RobotSimulation(robot=robot)
+    to_base = sim.description.world_to_base()
+    HOME = sim.description.home_array()
+    q_goal = sim.kinematics.ik(to_base.apply_array(ROBOT_HAND_GOAL), HOME)
     s = np.linspace(0.0, 1.0, 11)
     pos = HOME + np.outer(10 * s**3 - 15 * s**4 + 6 * s**5, q_goal - HOME)
     vel = np.outer((30 * s**2 - 60 * s**3 + 30 * s**4) / robot_move, q_goal - HOME)
@@ -36,14 +37,14 @@ def make_record(duration=2.0, onset=0.3, move=1.2, commit=0.7, robot_move=1.0, r
     while sim.time < duration - 1e-9:
         if not started and sim.time >= commit - 1e-9:
             points = points_from_arrays(s * robot_move, pos, vel)
-            assert sim.set_trajectory(JOINT_NAMES, points) is None
+            assert sim.set_trajectory(sim.joint_names, points) is None
             started = True
         t.append(sim.time)
         q.append(sim.q)
         flange.append(sim.flange_pose()[0])
         sim.step(steps_per_sample)
     t = np.array(t)
-    wrist = reach(t, onset, move, REST, GOAL, via_offset=(0.0, 0.0, 0.05))
+    wrist = to_base.apply_array(reach(t, onset, move, REST, GOAL, via_offset=(0.0, 0.0, 0.05)))
     wrist[(t >= gap[0]) & (t < gap[1])] = np.nan
     post_t = t[t >= onset][::5]
     logit = np.clip((post_t - onset) / (commit - onset), 0, None) * 3.0
@@ -56,7 +57,8 @@ def make_record(duration=2.0, onset=0.3, move=1.2, commit=0.7, robot_move=1.0, r
         t=t, q=np.array(q), flange=np.array(flange), wrist_t=t, wrist=wrist,
         posterior_t=post_t, posterior=post, phase=phase, alpha=np.full(post_t.size, 1 / move),
         onset_time=onset, commit_time=commit, end_time=onset + move, chosen_pattern='plate',
-        commit_fraction=(commit - onset) / move, target=ROBOT_HAND_GOAL.copy())
+        commit_fraction=(commit - onset) / move, target=to_base.apply_array(ROBOT_HAND_GOAL),
+        extra={'robot': sim.description.source})
 
 
 @pytest.fixture(scope='module')
@@ -87,9 +89,10 @@ def _project(model, data, camera, point, width, height):
     return (width / 2 * (1 + rel @ right / half_w), height / 2 * (1 - rel @ up / half_h))
 
 
-def test_frames_show_the_robot_moving(record, available):
-    # Only the robot moves in this copy: no person, no wrist marker or trail, no target marker.
-    robot_only = copy.deepcopy(record)
+@pytest.mark.parametrize('robot', shipped_robots())
+def test_frames_show_the_robot_moving(robot, available):
+    # Only the robot moves in this record: no person, no wrist marker or trail, no target marker.
+    robot_only = make_record(robot=robot)
     robot_only.wrist[:] = np.nan
     robot_only.target = None
     w, h = 160, 120
@@ -102,9 +105,13 @@ def test_frames_show_the_robot_moving(record, available):
     yy, xx = np.mgrid[0:h, 0:w]
     robot_area = np.zeros((h, w), bool)
     with render.InteractionRenderer(robot_only, w, h, overlay=False, with_human=False) as r:
-        bodies = [r.model.body(f'iiwa_link_{i}').id for i in range(8)] + [r.model.body('tool0').id]
+        d = r.replay.robot
+        assert d.name == robot
+        bodies = ([r.model.body(d.base_frame).id]
+                  + [r.model.joint(n).bodyid[0] for n in d.joint_names]
+                  + [r.model.body(d.flange_frame).id])
         for tk in (times[0], times[2]):
-            r.data.qpos[:7] = r.replay.joints(tk)
+            r.data.qpos[r._qadr] = r.replay.joints(tk)
             mujoco.mj_kinematics(r.model, r.data)
             px = np.array([_project(r.model, r.data, r.camera, r.data.xpos[b], w, h)
                            for b in bodies])
@@ -179,7 +186,7 @@ def test_render_interaction_writes_files(record, available, tmp_path):
 
 def test_bad_record_is_rejected(record, available):
     bad = make_record(duration=0.2)
-    bad.q = bad.q[:, :6]
+    bad.q = bad.q[:, :6]     # the iiwa has 7 joints
     with pytest.raises(ValueError, match='record.q'):
         render.render_frames(bad, [0.0], width=32, height=32)
 

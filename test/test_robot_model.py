@@ -1,4 +1,5 @@
-"""The iiwa 14 model: URDF facts, Pinocchio vs MuJoCo agreement, scene contents, IK."""
+"""The arm models: the iiwa 14's URDF facts; for every shipped robot, Pinocchio vs MuJoCo
+agreement, scene contents and IK over the task region."""
 
 import math
 
@@ -6,20 +7,33 @@ import mujoco
 import numpy as np
 import pytest
 
-from mixture_ip_ros.robot.kinematics import JOINT_NAMES, IiwaKinematics
-from mixture_ip_ros.robot.scene import (ACTUATOR_NAMES, FLANGE_SITE, HUMAN_WRIST, TABLE_TOP_Z,
+from mixture_ip_ros.robot.description import DEFAULT, JOINT_NAMES, shipped_robots
+from mixture_ip_ros.robot.kinematics import RobotKinematics
+from mixture_ip_ros.robot.scene import (actuator_names, FLANGE_SITE, HUMAN_WRIST, TABLE_TOP_Z,
                                         build_scene)
-from mixture_ip_ros.robot.sim import HOME
+
+HOME = DEFAULT.home_array()
 
 
 @pytest.fixture(scope='module')
 def kin():
-    return IiwaKinematics()
+    return RobotKinematics()
 
 
 @pytest.fixture(scope='module')
 def scene():
     return build_scene()
+
+
+@pytest.fixture(scope='module', params=shipped_robots())
+def arm(request):
+    """(kinematics, compiled scene) of one shipped robot."""
+    return RobotKinematics(request.param), build_scene(robot=request.param)
+
+
+def test_the_three_arms_are_shipped():
+    assert {'iiwa14', 'panda', 'ur5'} <= set(shipped_robots())
+    assert [RobotKinematics(r).dof for r in ('iiwa14', 'panda', 'ur5')] == [7, 7, 6]
 
 
 def test_urdf_limits_are_the_data_sheet_values(kin):
@@ -42,41 +56,65 @@ def test_stretched_arm_is_the_sum_of_the_link_offsets(kin):
     np.testing.assert_allclose(masses, [5.76, 6.35, 3.5, 3.5, 3.5, 1.8, 1.2])
 
 
-def test_pinocchio_and_mujoco_agree_at_100_random_configurations(kin, scene):
+def test_pinocchio_and_mujoco_agree_at_100_random_configurations(arm):
+    """Two independent loaders of the same model file: flange pose (MuJoCo's in the world, moved
+    into the base frame by the mount), mass matrix, Coriolis + gravity (gravity along the world's
+    -z, which Pinocchio sees in the base frame)."""
+    kin, scene = arm
+    n = kin.dof
+    to_base = kin.description.world_to_base()
     data = mujoco.MjData(scene)
     site = scene.site(FLANGE_SITE).id
     rng = np.random.default_rng(7)
-    M_mj = np.zeros((7, 7))
+    M_mj = np.zeros((n, n))
     for _ in range(100):
         q = rng.uniform(kin.lower, kin.upper)
-        qd = rng.normal(size=7)
+        qd = rng.normal(size=n)
         data.qpos[:] = q
         data.qvel[:] = qd
         mujoco.mj_forward(scene, data)
         mujoco.mj_fullM(scene, data, M_mj)
         p, R = kin.fk(q)
-        np.testing.assert_allclose(p, data.site_xpos[site], atol=1e-6)
-        np.testing.assert_allclose(R, data.site_xmat[site].reshape(3, 3), atol=1e-6)
+        np.testing.assert_allclose(p, to_base.apply_array(data.site_xpos[site]), atol=1e-6)
+        np.testing.assert_allclose(R, to_base.rotation @ data.site_xmat[site].reshape(3, 3),
+                                   atol=1e-6)
         np.testing.assert_allclose(kin.mass_matrix(q), M_mj, atol=1e-6)
         # Coriolis + gravity too: the controller relies on them.
-        np.testing.assert_allclose(kin.rnea(q, qd, np.zeros(7)), data.qfrc_bias, atol=1e-6)
+        np.testing.assert_allclose(kin.rnea(q, qd, np.zeros(n)), data.qfrc_bias, atol=1e-6)
+
+
+def test_each_arm_stands_at_its_mount_with_one_actuator_per_joint(arm):
+    kin, scene = arm
+    d = kin.description
+    n = kin.dof
+    assert scene.nq == scene.nv == scene.nu == n     # other joints (Panda fingers) welded
+    assert [scene.actuator(i).name for i in range(n)] == actuator_names(d)
+    assert [scene.joint(i).name for i in range(n)] == list(d.joint_names)
+    np.testing.assert_allclose(scene.actuator_ctrlrange[:, 1], kin.effort_limit)
+    np.testing.assert_allclose(scene.dof_damping, 0.0)
+    data = mujoco.MjData(scene)
+    mujoco.mj_forward(scene, data)
+    base = scene.body(d.base_frame).id
+    np.testing.assert_allclose(data.xpos[base], d.mount_xyz, atol=1e-12)
+    np.testing.assert_allclose(data.xmat[base].reshape(3, 3), d.mount_rotation, atol=1e-12)
 
 
 def test_perturbed_model_scales_mass_matrix_and_gravity(kin):
-    heavy = IiwaKinematics(mass_scale=1.1)
+    heavy = RobotKinematics(mass_scale=1.1)
     q = HOME
     np.testing.assert_allclose(heavy.mass_matrix(q), 1.1 * kin.mass_matrix(q), rtol=1e-12,
                                atol=1e-12)
     np.testing.assert_allclose(heavy.gravity(q), 1.1 * kin.gravity(q), rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(heavy.fk(q)[0], kin.fk(q)[0])
     with pytest.raises(ValueError):
-        IiwaKinematics(mass_scale=0.0)
+        RobotKinematics(mass_scale=0.0)
 
 
 def test_scene_actuators_table_pole_and_wrist(scene):
     assert scene.opt.timestep == pytest.approx(0.001)
     assert scene.nq == 7 and scene.nu == 7
-    assert [scene.actuator(i).name for i in range(7)] == ACTUATOR_NAMES
+    assert [scene.actuator(i).name for i in range(7)] == actuator_names()
+    assert actuator_names() == [f'{name}_torque' for name in JOINT_NAMES]
     np.testing.assert_allclose(scene.actuator_ctrlrange[:, 1], [320, 320, 176, 176, 110, 40, 40])
     np.testing.assert_allclose(scene.actuator_ctrlrange[:, 0], -scene.actuator_ctrlrange[:, 1])
     np.testing.assert_allclose(scene.actuator_gainprm[:, 0], 1.0)   # ctrl is torque in Nm
@@ -113,21 +151,29 @@ def test_arm_collides_with_table_but_not_with_itself(scene):
         assert not {scene.geom_bodyid[g1], scene.geom_bodyid[g2]} <= robot_bodies
 
 
-def test_ik_reaches_handover_region(kin):
+def test_ik_reaches_handover_region(arm):
+    """Positions in front of the robot over the table (world frame), for every arm from its
+    home posture."""
+    kin, _ = arm
+    home = kin.description.home_array()
+    to_base = kin.description.world_to_base()
     rng = np.random.default_rng(3)
     for _ in range(60):
-        target = rng.uniform([0.4, -0.4, 0.1], [0.8, 0.4, 0.5])
-        q = kin.ik(target, HOME)
+        target = to_base.apply_array(rng.uniform([0.45, -0.4, 0.1], [0.8, 0.4, 0.5]))
+        q = kin.ik(target, home)
         assert np.linalg.norm(kin.fk(q)[0] - target) < 1e-3
         assert kin.within_limits(q)
 
 
-def test_ik_with_orientation_recovers_a_reachable_pose(kin):
+def test_ik_with_orientation_recovers_a_reachable_pose(arm):
+    kin, _ = arm
+    home = kin.description.home_array()
+    mid, half = (kin.upper + kin.lower) / 2, (kin.upper - kin.lower) / 2
     rng = np.random.default_rng(4)
     for _ in range(20):
-        q_true = rng.uniform(kin.lower * 0.7, kin.upper * 0.7)
+        q_true = rng.uniform(mid - 0.7 * half, mid + 0.7 * half)
         p, R = kin.fk(q_true)
-        q = kin.ik(p, HOME, rotation=R, rotation_tol=1e-2)
+        q = kin.ik(p, home, rotation=R, rotation_tol=1e-2)
         p2, R2 = kin.fk(q)
         assert np.linalg.norm(p2 - p) < 1e-3
         angle = math.acos(np.clip((np.trace(R2.T @ R) - 1) / 2, -1, 1))
@@ -155,8 +201,9 @@ def test_ik_rejects_unreachable_and_bad_input(kin):
         kin.ik([0.5, 0.0, 0.3], np.zeros(6))
 
 
-def test_fk_positions_matches_fk(kin):
-    Q = np.random.default_rng(5).uniform(kin.lower, kin.upper, size=(10, 7))
+def test_fk_positions_matches_fk(arm):
+    kin, _ = arm
+    Q = np.random.default_rng(5).uniform(kin.lower, kin.upper, size=(10, kin.dof))
     P = kin.fk_positions(Q)
     for q, p in zip(Q, P):
         np.testing.assert_allclose(p, kin.fk(q)[0], atol=1e-12)

@@ -1,14 +1,23 @@
-"""Trajectory acceptance (JTC rules + finiteness) and interpolation, alone and in the sim."""
+"""Trajectory acceptance (JTC rules + finiteness) and interpolation, alone and in the sim.
+
+The acceptance rules and the simulation's handling of rejections run for every shipped robot
+(the controller's joints are the robot's)."""
 
 import numpy as np
 import pytest
 
-from mixture_ip_ros.robot.description import JOINT_NAMES
-from mixture_ip_ros.robot.sim import HOME, IiwaSimulation
+from mixture_ip_ros.robot.description import JOINT_NAMES, load_description, shipped_robots
+from mixture_ip_ros.robot.sim import RobotSimulation
 from mixture_ip_ros.robot.trajectory import (JointTrajectory, TrajectoryFollower, TrajectoryPoint,
                                              points_from_arrays, validate_trajectory)
 
-J = list(JOINT_NAMES)
+J7 = list(JOINT_NAMES)   # the interpolation tests' joints (the default robot's)
+
+
+@pytest.fixture(params=shipped_robots())
+def J(request):
+    """The controller's joints: one shipped robot's."""
+    return list(load_description(request.param).joint_names)
 
 
 def _points(n=3, dof=7, dt=0.5, vel=True):
@@ -16,107 +25,118 @@ def _points(n=3, dof=7, dt=0.5, vel=True):
             for i in range(n)]
 
 
-def _validate(names=None, points=None, start=None, now=0.0, **kw):
+def _validate(J, names=None, points=None, start=None, now=0.0, **kw):
     return validate_trajectory(J if names is None else names,
-                               _points() if points is None else points, start, now, J, **kw)
+                               _points(dof=len(J)) if points is None else points, start, now, J,
+                               **kw)
 
 
-def test_a_good_trajectory_is_accepted():
-    result = _validate()
+def test_a_good_trajectory_is_accepted(J):
+    result = _validate(J)
     assert isinstance(result, JointTrajectory)
     np.testing.assert_allclose(result.times, [0.5, 1.0, 1.5])
+    assert result.positions.shape == (3, len(J))
     assert result.has_velocities.all() and not result.has_accelerations.any()
 
 
-def test_reject_empty_joint_names():
-    assert 'empty joint_names' in _validate(names=[])
+def test_reject_empty_joint_names(J):
+    assert 'empty joint_names' in _validate(J, names=[])
 
 
-def test_reject_empty_points():
-    assert 'no points' in _validate(points=[])
+def test_reject_empty_points(J):
+    assert 'no points' in _validate(J, points=[])
 
 
-def test_reject_unknown_joint():
-    assert 'unknown joint' in _validate(names=J[:6] + ['elbow'])
+def test_reject_unknown_joint(J):
+    assert 'unknown joint' in _validate(J, names=J[:-1] + ['elbow'])
 
 
-def test_reject_duplicate_joint():
-    assert 'duplicate' in _validate(names=J[:6] + [J[0]])
+def test_reject_duplicate_joint(J):
+    assert 'duplicate' in _validate(J, names=J[:-1] + [J[0]])
 
 
-def test_reject_wrong_joint_count():
-    assert 'partial goals are off' in _validate(names=J[:6], points=_points(dof=6))
+def test_reject_wrong_joint_count(J):
+    n = len(J)
+    assert 'partial goals are off' in _validate(J, names=J[:-1], points=_points(dof=n - 1))
 
 
-def test_partial_goal_when_allowed_fills_the_missing_joints():
-    fill = np.arange(7) * 0.1
-    result = _validate(names=[J[2], J[0]], points=[TrajectoryPoint(1.0, [5.0, 6.0])],
+def test_reject_another_robots_joints():
+    panda, ur5 = (list(load_description(r).joint_names) for r in ('panda', 'ur5'))
+    assert 'unknown joint' in _validate(panda, names=J7, points=_points(dof=7))
+    assert 'partial goals are off' in _validate(ur5, names=panda, points=_points(dof=7))
+
+
+def test_partial_goal_when_allowed_fills_the_missing_joints(J):
+    fill = np.arange(len(J)) * 0.1
+    result = _validate(J, names=[J[2], J[0]], points=[TrajectoryPoint(1.0, [5.0, 6.0])],
                        allow_partial_joints_goal=True, fill_positions=fill)
-    np.testing.assert_allclose(result.positions[0], [6.0, 0.1, 5.0, 0.3, 0.4, 0.5, 0.6])
+    expected = fill.copy()
+    expected[[2, 0]] = [5.0, 6.0]
+    np.testing.assert_allclose(result.positions[0], expected)
 
 
-def test_other_joint_order_is_remapped():
-    order = [6, 0, 5, 1, 4, 2, 3]
+def test_other_joint_order_is_remapped(J):
+    order = np.random.default_rng(len(J)).permutation(len(J))
     names = [J[i] for i in order]
-    values = np.array([10.0, 20, 30, 40, 50, 60, 70])
-    result = _validate(names=names, points=[TrajectoryPoint(1.0, values.tolist())])
-    expected = np.empty(7)
+    values = 10.0 * np.arange(1, len(J) + 1)
+    result = _validate(J, names=names, points=[TrajectoryPoint(1.0, values.tolist())])
+    expected = np.empty(len(J))
     expected[order] = values
     np.testing.assert_allclose(result.positions[0], expected)
 
 
 @pytest.mark.parametrize('field', ['positions', 'velocities', 'accelerations'])
-def test_reject_size_mismatch(field):
-    points = _points()
-    setattr(points[1], field, [0.0] * 6)
-    assert f'{field} has 6 values' in _validate(points=points)
+def test_reject_size_mismatch(J, field):
+    points = _points(dof=len(J))
+    setattr(points[1], field, [0.0] * (len(J) - 1))
+    assert f'{field} has {len(J) - 1} values' in _validate(J, points=points)
 
 
-def test_reject_missing_positions():
-    points = _points()
+def test_reject_missing_positions(J):
+    points = _points(dof=len(J))
     points[2].positions = []
-    assert 'positions has 0 values' in _validate(points=points)
+    assert 'positions has 0 values' in _validate(J, points=points)
 
 
 @pytest.mark.parametrize('field,bad', [('positions', np.nan), ('velocities', np.inf),
                                        ('accelerations', -np.inf)])
-def test_reject_non_finite_values(field, bad):
-    points = _points()
-    values = [0.0] * 7
+def test_reject_non_finite_values(J, field, bad):
+    points = _points(dof=len(J))
+    values = [0.0] * len(J)
     values[3] = bad
     setattr(points[1], field, values)
-    assert f'non-finite value in {field}' in _validate(points=points)
+    assert f'non-finite value in {field}' in _validate(J, points=points)
 
 
 @pytest.mark.parametrize('times', [[0.5, 0.5, 1.0], [0.5, 1.0, 0.9]])
-def test_reject_time_not_strictly_increasing(times):
-    points = _points()
+def test_reject_time_not_strictly_increasing(J, times):
+    points = _points(dof=len(J))
     for p, t in zip(points, times):
         p.time_from_start = t
-    assert 'not strictly increasing' in _validate(points=points)
+    assert 'not strictly increasing' in _validate(J, points=points)
 
 
-def test_reject_trajectory_that_ends_in_the_past():
+def test_reject_trajectory_that_ends_in_the_past(J):
     # Starts at t=10 and lasts 1.5 s: at now=12 it is over.
-    assert 'ends in the past' in _validate(start=10.0, now=12.0)
+    assert 'ends in the past' in _validate(J, start=10.0, now=12.0)
     # Still running at now=11: accepted (sampled from now).
-    assert isinstance(_validate(start=10.0, now=11.0), JointTrajectory)
+    assert isinstance(_validate(J, start=10.0, now=11.0), JointTrajectory)
     # No start time (header.stamp 0) is never in the past.
-    assert isinstance(_validate(start=None, now=1e6), JointTrajectory)
+    assert isinstance(_validate(J, start=None, now=1e6), JointTrajectory)
 
 
-def test_reject_nonzero_final_velocity_unless_allowed():
-    points = _points()
-    points[-1].velocities = [0.1] + [0.0] * 6
-    assert 'last point is not zero' in _validate(points=points)
-    assert isinstance(_validate(points=points, allow_nonzero_velocity_at_trajectory_end=True),
+def test_reject_nonzero_final_velocity_unless_allowed(J):
+    points = _points(dof=len(J))
+    points[-1].velocities = [0.1] + [0.0] * (len(J) - 1)
+    assert 'last point is not zero' in _validate(J, points=points)
+    assert isinstance(_validate(J, points=points, allow_nonzero_velocity_at_trajectory_end=True),
                       JointTrajectory)
 
 
 # ---------------------------------------------------------------------- interpolation
 
 def _anchored(points, t=0.0, q=None, qd=None, start=None):
-    traj = validate_trajectory(J, points, start, t, J,
+    traj = validate_trajectory(J7, points, start, t, J7,
                                allow_nonzero_velocity_at_trajectory_end=True)
     assert isinstance(traj, JointTrajectory), traj
     follower = TrajectoryFollower(7)
@@ -208,25 +228,29 @@ def test_header_stamp_zero_starts_now():
 
 # ---------------------------------------------------------------------- in the simulation
 
-def test_simulation_counts_and_logs_rejections():
+@pytest.mark.parametrize('robot', shipped_robots())
+def test_simulation_counts_and_logs_rejections(robot):
     logged = []
-    sim = IiwaSimulation(logger=logged.append)
-    assert sim.set_trajectory(J[:6], _points(dof=6)) is not None
+    sim = RobotSimulation(robot=robot, logger=logged.append)
+    J, n = sim.joint_names, sim.dof
+    assert sim.set_trajectory(J[:-1], _points(dof=n - 1)) is not None
     assert sim.set_trajectory(J, []) is not None
-    bad = _points()
-    bad[0].positions = [np.nan] * 7
+    bad = _points(dof=n)
+    bad[0].positions = [np.nan] * n
     assert 'non-finite' in sim.set_trajectory(J, bad)
     assert sim.rejection_count == 3
     assert sum('trajectory rejected' in m for m in logged) == 3
     assert 'non-finite' in logged[-1]
-    # A rejected trajectory changes nothing: the arm keeps holding.
+    # A rejected trajectory changes nothing: the arm keeps holding its home posture.
     sim.step(100)
-    np.testing.assert_allclose(sim.q, HOME, atol=1e-6)
+    np.testing.assert_allclose(sim.q, sim.description.home, atol=1e-6)
 
 
 @pytest.mark.parametrize('open_loop', [False, True])
 def test_replacement_mid_trajectory_has_no_jump(open_loop):
-    sim = IiwaSimulation(open_loop_control=open_loop)
+    sim = RobotSimulation(open_loop_control=open_loop)
+    J = sim.joint_names
+    HOME = sim.description.home_array()
     q_a = HOME + np.array([0.6, 0.3, -0.4, 0.5, 0.3, -0.3, 0.8])
     t = np.linspace(0.0, 2.0, 11)
     s = t / 2.0

@@ -19,9 +19,10 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from conftest import private_domain_id
 from mixture_ip_ros.nodes.sim_node import SimNode
 from mixture_ip_ros.core.share import config_path
-from mixture_ip_ros.robot.description import JOINT_NAMES
-from mixture_ip_ros.robot.kinematics import IiwaKinematics
-from mixture_ip_ros.robot.sim import HOME
+from mixture_ip_ros.robot.description import DEFAULT, JOINT_NAMES, load_description
+from mixture_ip_ros.robot.kinematics import RobotKinematics
+
+HOME = DEFAULT.home_array()
 
 RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 
@@ -77,7 +78,7 @@ def test_joint_states_converge_to_the_trajectory_end(sim):
     assert list(last.name) == list(JOINT_NAMES)
     np.testing.assert_allclose(last.position, goal, atol=1e-4)
     np.testing.assert_allclose(last.velocity, 0.0, atol=1e-3)
-    expected_flange = IiwaKinematics().fk(goal)[0]
+    expected_flange = RobotKinematics().fk(goal)[0]
     pose = harness.poses[-1].pose.position
     np.testing.assert_allclose([pose.x, pose.y, pose.z], expected_flange, atol=1e-3)
     assert harness.poses[-1].header.frame_id == 'iiwa_link_0'
@@ -89,6 +90,31 @@ def test_joint_states_converge_to_the_trajectory_end(sim):
     assert np.all(np.diff(clocks) > 0)
     assert set(np.round(stamps, 6)) <= set(np.round(clocks, 6))
     assert harness.sim_node.rejection_count == 0
+
+
+def test_the_robot_parameter_makes_it_another_arm(harness):
+    """robot:=ur5 and nothing else: six joints at the UR5's home, its frame on the flange pose
+    (in its base frame, 10 cm from the scene's origin), and its trajectories executed."""
+    ur5 = load_description('ur5')
+    h = Sim(harness, robot='ur5')
+    sim = h.sim_node.sim
+    h.spin_until(lambda: h.pub.get_subscription_count() > 0 and h.joint_states)
+    assert list(h.joint_states[-1].name) == list(ur5.joint_names)
+    np.testing.assert_allclose(h.joint_states[-1].position, ur5.home, atol=1e-6)
+    assert list(h.sim_node.get_parameter('natural_frequency').value) == [60.0] * 6
+    goal = ur5.home_array() + np.array([0.3, -0.2, 0.25, 0.3, -0.3, 0.2])
+    h.pub.publish(_trajectory(HOME, 1.0))                       # the iiwa's: refused
+    h.pub.publish(_trajectory(goal, 1.0, names=ur5.joint_names))
+    h.spin_until(lambda: sim.accepted_count == 1 and h.sim_node.rejection_count == 1)
+    sent_at = sim.time
+    h.spin_until(lambda: sim.time > sent_at + 2.0 and h.poses
+                 and h.poses[-1].header.stamp.sec >= int(sent_at + 2.0))
+    np.testing.assert_allclose(h.joint_states[-1].position, goal, atol=1e-4)
+    pose = h.poses[-1]
+    assert pose.header.frame_id == 'base_link'
+    np.testing.assert_allclose([pose.pose.position.x, pose.pose.position.y,
+                                pose.pose.position.z], RobotKinematics('ur5').fk(goal)[0],
+                               atol=1e-3)
 
 
 def test_bad_trajectories_are_rejected_and_counted(sim):

@@ -61,12 +61,15 @@ def _writable_parent(path, text):
 def _generate(args):
     from mixture_ip_ros.scenarios.generated import write_scenario_bags
     bags = write_scenario_bags(args.scenario, Path(args.out), seed=args.seed,
-                               occlusion=args.occlusion, storage=args.storage)
-    print(f'wrote {len(bags)} {args.scenario} demonstrations ({args.storage} bags) to {args.out}')
+                               occlusion=args.occlusion, storage=args.storage, robot=args.robot)
+    print(f'wrote {len(bags)} {args.scenario} demonstrations ({args.storage} bags, '
+          f'{args.robot}) to {args.out}')
 
 
 def _train(args):
     from mixture_ip_ros.app.training import text_progress, train_to_file
+    from mixture_ip_ros.robot.description import load_description
+    robot = load_description(args.robot)
     if (args.bag_dir is None) == (args.csv is None):
         raise ValueError('give a folder of bags or --csv DIR (one of them)')
     kwargs = {'n_basis': args.n_basis, 'method': args.method, 'criterion': args.criterion,
@@ -89,7 +92,9 @@ def _train(args):
         if args.observed or args.controlled:
             raise ValueError('--observed/--controlled name CSV columns; bags have the wrist and '
                              'the robot joints')
-        demos, skipped = load_dataset(args.bag_dir, on_error=args.on_error)
+        demos, skipped = load_dataset(args.bag_dir, on_error=args.on_error,
+                                      joint_names=robot.joint_names,
+                                      transform=robot.world_to_base())
         for s in skipped:
             print(f'skipped {s.path}: {s.reason}', file=sys.stderr)
         layout = None
@@ -100,7 +105,7 @@ def _train(args):
     else:
         kwargs['candidates'] = range(1, args.max_components + 1)
         kwargs['progress'] = text_progress(what='choosing K')
-    model, info = train_to_file(demos, args.out, layout=layout, **kwargs)
+    model, info = train_to_file(demos, args.out, layout=layout, robot=robot, **kwargs)
     sel = info.get('selection')
     if sel is not None and not sel['clear_optimum']:
         print(f"warning: K = {sel['chosen']} by {sel['criterion']}: {sel['note']}",
@@ -175,6 +180,14 @@ def _lifecycle(args):
         rclpy.try_shutdown()
 
 
+def _add_robot(parser):
+    from mixture_ip_ros.robot.description import DEFAULT_ROBOT, shipped_robots
+    parser.add_argument('--robot', default=DEFAULT_ROBOT,
+                        help=f'the arm: a shipped name ({", ".join(shipped_robots())}) or the '
+                             'path of a robot description file (docs/robots.md); default '
+                             f'{DEFAULT_ROBOT}')
+
+
 class _Parser(argparse.ArgumentParser):
     """Wrong arguments: one line saying what is wrong (and where the help is), exit code 2."""
 
@@ -193,6 +206,7 @@ def build_parser():
     g.add_argument('--occlusion', type=_bounded(float, 0.0, 1.0), default=0.0,
                    help='probability that a demonstration has an occlusion gap in the wrist stream')
     g.add_argument('--storage', choices=['mcap', 'sqlite3'], default='mcap')
+    _add_robot(g)
     g.set_defaults(func=_generate)
 
     t = sub.add_parser('train', help='learn a Mixture of Interaction ProMPs from a folder of bags '
@@ -229,6 +243,7 @@ def build_parser():
     t.add_argument('--method', choices=['regression', 'em'], default='regression',
                    help="'em' learns from demonstrations with missing data (occlusions)")
     t.add_argument('--on-error', choices=['skip', 'raise'], default='skip')
+    _add_robot(t)
     t.set_defaults(func=_train)
 
     e = sub.add_parser('evaluate', help="reproduce the thesis's experiments: plots + metrics.json")
@@ -241,11 +256,15 @@ def build_parser():
                    help='evaluate on this folder of bags (with labels.json) instead of generating')
     e.set_defaults(func=_evaluate)
 
-    d = sub.add_parser('demo', help='closed loop: bags -> observer -> estimator -> MuJoCo iiwa')
-    d.add_argument('--data', default='out/box_assembly_bags',
-                   help='folder of demonstration bags (generated if missing)')
-    d.add_argument('--out', default='out/demo', type=_out_dir,
-                   help='model, plots and report go here')
+    d = sub.add_parser('demo', help='closed loop: bags -> observer -> estimator -> MuJoCo arm')
+    _add_robot(d)
+    d.add_argument('--data', default=None,
+                   help='folder of demonstration bags, generated if missing (default: '
+                        'out/box_assembly_bags for the iiwa14, out/<robot>/box_assembly_bags '
+                        'for another robot)')
+    d.add_argument('--out', default=None, type=_out_dir,
+                   help='model, plots and report go here (default: out/demo, out/<robot>/demo '
+                        'for another robot)')
     d.add_argument('--json', default=None, type=_new_file,
                    help='also write the report as JSON here')
     d.add_argument('--render', default=None, type=_out_dir,

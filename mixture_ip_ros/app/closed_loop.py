@@ -5,7 +5,9 @@ nodes start unconfigured and are brought up through their lifecycle services (si
 observer, then estimator), as an operator would. The sim node owns the clock (/clock, paced at
 ``real_time_factor``), every other node runs with use_sim_time, and the player publishes each
 bag message when the simulated clock reaches its recorded time (stamps rewritten to that time).
-Used by ``mixture-ip demo`` and the integration tests.
+The robot is one option, ``robot``: every node gets it as its ``robot`` parameter (joint names,
+frames, mocap transform, catch-up speeds, limits and the simulated arm follow from its
+description). Used by ``mixture-ip demo`` and the integration tests.
 """
 
 from dataclasses import asdict
@@ -26,7 +28,8 @@ from mixture_ip_ros.nodes.recorder import InteractionRecorder
 from mixture_ip_ros.nodes.sim_node import SimNode
 from mixture_ip_ros.nodes.spinning import spin_in_thread
 from mixture_ip_ros.io.records import InteractionRecord
-from mixture_ip_ros.robot.kinematics import IiwaKinematics
+from mixture_ip_ros.robot.description import load_description
+from mixture_ip_ros.robot.kinematics import RobotKinematics
 
 
 def _params(d: dict):
@@ -36,19 +39,21 @@ def _params(d: dict):
 class ClosedLoop:
     """Start the nodes once, then ``run_interaction(bag)`` per replayed demonstration."""
 
-    def __init__(self, model_path, *, domain_id=None, real_time_factor=1.0, home=None,
-                 sim_params=None, observer_params=None, estimator_params=None):
+    def __init__(self, model_path, *, robot=None, domain_id=None, real_time_factor=1.0,
+                 home=None, sim_params=None, observer_params=None, estimator_params=None):
+        self.robot = load_description(robot)
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain_id)
         sim_time = [Parameter('use_sim_time', value=True)]
         managed = [Parameter('autostart', value=False)]
+        which = {'robot': self.robot.source}
         self.sim = SimNode(context=self.context, parameter_overrides=managed + _params(
-            {'simulated_time': True, 'real_time_factor': float(real_time_factor),
+            {**which, 'simulated_time': True, 'real_time_factor': float(real_time_factor),
              **(sim_params or {})}))
         self.observer = ObserverNode(context=self.context, parameter_overrides=(
-            managed + sim_time + _params(observer_params or {})))
+            managed + sim_time + _params({**which, **(observer_params or {})})))
         self.estimator = EstimatorNode(context=self.context, parameter_overrides=(
-            managed + sim_time + _params({'model_path': str(model_path),
+            managed + sim_time + _params({**which, 'model_path': str(model_path),
                                           **(estimator_params or {})})))
         self.recorder = InteractionRecorder(context=self.context, parameter_overrides=sim_time)
         self._spinning = {node: spin_in_thread(node)
@@ -66,7 +71,7 @@ class ClosedLoop:
         self.home = np.asarray(home if home is not None else self.sim.sim.q, dtype=float)
         self._home_pub = self.recorder.create_publisher(JointTrajectory, '/iiwa/joint_trajectory',
                                                         10)
-        self.kinematics = IiwaKinematics()
+        self.kinematics = RobotKinematics(self.robot)
         self.wrist_topic = self.observer.params.wrist_topic
         self.labels = (self.estimator.metadata.get('component_labels')
                        or [f'component_{k}' for k in range(self.estimator.model.n_components)])
@@ -96,7 +101,8 @@ class ClosedLoop:
         """Send the robot back to its start posture and wait until it is there."""
         msg = JointTrajectory()
         msg.joint_names = list(self.sim.sim.joint_names)
-        pt = JointTrajectoryPoint(positions=self.home.tolist(), velocities=[0.0] * 7)
+        pt = JointTrajectoryPoint(positions=self.home.tolist(),
+                                  velocities=[0.0] * len(msg.joint_names))
         pt.time_from_start.sec = int(duration)
         pt.time_from_start.nanosec = int((duration % 1) * 1e9)
         msg.points = [pt]
@@ -109,6 +115,7 @@ class ClosedLoop:
         """Replay the human's wrist stream of ``bag`` through the loop (the recorded robot joints
         are training data and stay in the bag); returns what happened."""
         self.recorder.clear()
+        self.sim.sim.reset_tracking()
         start = self.now()
         player = BagPlayer(context=self.context, parameter_overrides=[
             Parameter('use_sim_time', value=True)] + _params(
@@ -127,7 +134,7 @@ class ClosedLoop:
     def _record(self, name, true_pattern, target, start) -> InteractionRecord:
         snap = self.recorder.snapshot()
         joints = [(t, q) for t, q in snap['joints'] if t >= start]
-        q = np.array([q for _, q in joints]).reshape(-1, 7)
+        q = np.array([q for _, q in joints]).reshape(-1, self.kinematics.dof)
         inter = self.estimator.interactions[-1] if self.estimator.interactions else None
         K = len(self.labels)
         post = np.array([d for _, d in snap['posterior']]) if snap['posterior'] else np.zeros(
@@ -151,7 +158,8 @@ class ClosedLoop:
             extra={'interaction': None if inter is None else asdict(inter),
                    'non_finite_commands': self.recorder.non_finite_commands,
                    'sim_rejections': self.sim.rejection_count,
-                   'last_rejection': self.sim.last_rejection})
+                   'last_rejection': self.sim.last_rejection, 'robot': self.robot.source,
+                   'tracking': self.sim.sim.tracking_error()})
 
     def close(self):
         for client in self.lifecycle.values():

@@ -1,10 +1,11 @@
 """`mixture-ip demo`: the closed loop end to end.
 
-Generate the box-assembly demonstrations as bags (if the folder is missing), hold out some
-interactions per pattern, train on the rest (K by leave-one-out), then replay the held-out
-human demonstrations through the real nodes (bag_player -> observer -> estimator -> sim) on
-simulated time, and report per interaction the true and chosen pattern, when the robot
-committed, how far its hand ended from the target, and the estimator's latency.
+Generate the box-assembly demonstrations as bags for the chosen robot (if the folder is missing),
+hold out some interactions per pattern, train on the rest (K by leave-one-out), then replay the
+held-out human demonstrations through the real nodes (bag_player -> observer -> estimator -> sim)
+on simulated time, and report per interaction the true and chosen pattern, when the robot
+committed, how far its hand ended from the target, how closely it tracked its commands, and the
+estimator's latency.
 """
 
 import json
@@ -18,8 +19,10 @@ import numpy as np
 
 from mixture_ip_ros.io.bags import read_bag
 from mixture_ip_ros.io.dataset import load_demonstration
-from mixture_ip_ros.scenarios.generated import read_labels, write_scenario_bags
-from mixture_ip_ros.robot.kinematics import IiwaKinematics
+from mixture_ip_ros.scenarios.generated import (read_labels, read_scenario_robot,
+                                                write_scenario_bags)
+from mixture_ip_ros.robot.description import DEFAULT_ROBOT, load_description
+from mixture_ip_ros.robot.kinematics import RobotKinematics
 from mixture_ip_ros.app.training import text_progress, train_to_file
 
 log = logging.getLogger('mixture_ip_ros.app.demo')
@@ -37,25 +40,41 @@ def split_held_out(labels: dict, per_pattern: int, seed: int = 0):
 
 def demonstrated_target(bag, kinematics):
     """Where the robot's hand ended in the demonstration (FK of its last recorded posture) and
-    where the human's wrist ended."""
-    rec = read_bag(bag)
+    where the human's wrist ended, both in the robot's base frame."""
+    robot = kinematics.description
+    rec = read_bag(bag, joint_names=robot.joint_names)
     wrist = rec.wrist_xyz[~np.isnan(rec.wrist_xyz).any(axis=1)][-1]
-    return kinematics.fk(rec.joint_q[-1])[0], wrist
+    return kinematics.fk(rec.joint_q[-1])[0], robot.world_to_base().apply_array(wrist)
 
 
-def prepare(data_dir: Path, out_dir: Path, held_out: int, seed: int, n_components=None):
-    """Bags (generated if missing), the held-out split and a trained model file."""
+def default_paths(robot) -> tuple:
+    """(bag folder, output folder) of ``mixture-ip demo`` for a robot: out/box_assembly_bags and
+    out/demo for the default robot, out/<name>/box_assembly_bags and out/<name>/demo otherwise."""
+    name = load_description(robot).name
+    root = Path('out') if name == DEFAULT_ROBOT else Path('out') / name
+    return root / 'box_assembly_bags', root / 'demo'
+
+
+def prepare(data_dir: Path, out_dir: Path, held_out: int, seed: int, n_components=None,
+            robot=None):
+    """Bags for ``robot`` (generated if missing), the held-out split and a trained model file."""
+    robot = load_description(robot)
     if not data_dir.is_dir() or not any(data_dir.iterdir()):
-        log.info('generating the box-assembly demonstrations in %s', data_dir)
-        write_scenario_bags('box_assembly', data_dir, seed=seed)
+        log.info('generating the box-assembly demonstrations for %s in %s', robot.name, data_dir)
+        write_scenario_bags('box_assembly', data_dir, seed=seed, robot=robot)
+    made_for = read_scenario_robot(data_dir)
+    if made_for != robot.name:
+        raise ValueError(f'{data_dir} holds demonstrations of {made_for!r}, not {robot.name!r}; '
+                         'give another --data folder')
     labels = read_labels(data_dir)
     train_names, held_names = split_held_out(labels, held_out, seed)
-    demos = [load_demonstration(data_dir / n) for n in train_names]
+    demos = [load_demonstration(data_dir / n, joint_names=robot.joint_names,
+                                transform=robot.world_to_base()) for n in train_names]
     model_path = out_dir / 'model.npz'
     kwargs = {'n_components': n_components} if n_components else {
         'progress': text_progress()}
     t0 = time.monotonic()
-    model, info = train_to_file(demos, model_path, **kwargs)
+    model, info = train_to_file(demos, model_path, robot=robot, **kwargs)
     info['train_seconds'] = time.monotonic() - t0
     return labels, held_names, model_path, info
 
@@ -64,14 +83,20 @@ def run_demo(args):
     os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
     from mixture_ip_ros.app.closed_loop import ClosedLoop   # rclpy only once the data is ready
 
-    data_dir, out_dir = Path(args.data), Path(args.out)
+    robot = load_description(args.robot)
+    default_data, default_out = default_paths(robot)
+    data_dir = Path(args.data) if args.data else default_data
+    out_dir = Path(args.out) if args.out else default_out
     out_dir.mkdir(parents=True, exist_ok=True)
-    labels, held, model_path, info = prepare(data_dir, out_dir, args.held_out, args.seed)
-    print(f"trained on {info['n_demonstrations']} demonstrations: K = {info['n_components']}"
+    labels, held, model_path, info = prepare(data_dir, out_dir, args.held_out, args.seed,
+                                             robot=robot)
+    print(f"{robot.name}: trained on {info['n_demonstrations']} demonstrations: "
+          f"K = {info['n_components']}"
           + (f" (leave-one-out RMS by K: {np.round(info['loo_rms_mean'], 4).tolist()})"
              if 'loo_rms_mean' in info else ''))
-    kin = IiwaKinematics()
-    loop = ClosedLoop(model_path, domain_id=int(os.environ.get('ROS_DOMAIN_ID', 42)))
+    kin = RobotKinematics(robot)
+    loop = ClosedLoop(model_path, robot=robot,
+                      domain_id=int(os.environ.get('ROS_DOMAIN_ID', 42)))
     records = []
     try:
         for name in held:
@@ -88,6 +113,7 @@ def run_demo(args):
     finally:
         loop.close()
     report = make_report(records, info, latency)
+    report['robot'] = robot.name
     print(json.dumps({k: v for k, v in report.items() if k != 'interactions'}, indent=1))
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
@@ -103,31 +129,47 @@ def hand_error_cm(rec):
     return float(100 * np.linalg.norm(rec.flange[-1] - rec.target)) if len(rec.flange) else None
 
 
+def tracking_mrad(rec):
+    """(RMS, max) joint tracking error of the interaction in mrad (None if it never moved)."""
+    tracking = rec.extra.get('tracking') or {}
+    if tracking.get('rms') is None:
+        return None, None
+    return 1e3 * tracking['rms'], 1e3 * tracking['max']
+
+
 def _line(rec):
     he = hand_error_cm(rec)
     wrist = rec.extra.get('wrist_end')
     to_wrist = (100 * np.linalg.norm(rec.flange[-1] - wrist)) if wrist is not None else np.nan
     commit = '-' if rec.commit_fraction is None else f'{rec.commit_fraction:.2f}'
+    rms, _ = tracking_mrad(rec)
+    track = '-' if rms is None else f'{rms:.3f}'
     return (f'{rec.name:>16s}: true {rec.true_pattern:<12s} chosen {str(rec.chosen_pattern):<12s}'
             f' committed at {commit} of the motion; hand {he:5.1f} cm from target, '
-            f'{to_wrist:5.1f} cm from the wrist')
+            f'{to_wrist:5.1f} cm from the wrist; tracking RMS {track} mrad')
 
 
 def make_report(records, info, latency):
     rows = []
     for r in records:
+        rms, worst = tracking_mrad(r)
         rows.append({'name': r.name, 'true_pattern': r.true_pattern,
                      'chosen_pattern': r.chosen_pattern, 'commit_fraction': r.commit_fraction,
                      'hand_error_cm': hand_error_cm(r),
                      'hand_to_wrist_cm': float(100 * np.linalg.norm(
                          r.flange[-1] - r.extra['wrist_end'])) if 'wrist_end' in r.extra else None,
+                     'tracking_rms_mrad': rms, 'tracking_max_mrad': worst,
                      'non_finite_commands': r.extra.get('non_finite_commands', 0)})
     correct = [r['true_pattern'] == r['chosen_pattern'] for r in rows]
+    tracked = [r['tracking_rms_mrad'] for r in rows if r['tracking_rms_mrad'] is not None]
     return {'interactions': rows,
             'selection_accuracy': float(np.mean(correct)) if rows else None,
             'hand_error_cm_mean': float(np.mean([r['hand_error_cm'] for r in rows])) if rows else None,
             'commit_fraction_mean': float(np.mean([r['commit_fraction'] for r in rows
                                                    if r['commit_fraction'] is not None] or [np.nan])),
+            'hand_error_cm_max': max(r['hand_error_cm'] for r in rows) if rows else None,
+            'tracking_rms_mrad_mean': float(np.mean(tracked)) if tracked else None,
+            'tracking_rms_mrad_max': float(np.max(tracked)) if tracked else None,
             'n_components': info['n_components'], 'training': info, 'latency': latency}
 
 

@@ -260,14 +260,14 @@ def _feed_until(est, demo, rows, j, t_max):
 def evaluate_box_assembly(demos, out_dir: Path, config: EvalConfig = None) -> dict:
     """Thesis 3.4.2 plus online selection; see the module docstring. Returns the metrics dict."""
     from mixture_ip_ros.viz import plots
-    from mixture_ip_ros.robot.kinematics import IiwaKinematics
+    from mixture_ip_ros.robot.kinematics import RobotKinematics
     config = _with_default_noise(config or box_config(), WRIST_OBSERVATION_NOISE)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     demos = prepare(demos, config.subsample)
     if any(d.label is None for d in demos):
         raise ValueError('box_assembly evaluation needs labelled demonstrations')
-    kin = IiwaKinematics()
+    kin = RobotKinematics()
     candidates = [int(k) for k in config.candidates if k <= len(demos) - 1]
     folds = fold_indices(len(demos), config.fold_stride)
     t0 = time.perf_counter()
@@ -365,15 +365,15 @@ def evaluate_box_assembly(demos, out_dir: Path, config: EvalConfig = None) -> di
 def evaluate_pole(demos, out_dir: Path, config: EvalConfig = None) -> dict:
     """Thesis 3.4.1: RMS vs K, and one Gaussian vs the mixture as flange paths around the pole."""
     from mixture_ip_ros.viz import plots
-    from mixture_ip_ros.scenarios.generated import (LINK_RADIUS, POLE_BOTH_SIDES_Y, link_points,
+    from mixture_ip_ros.scenarios.generated import (POLE_BOTH_SIDES_Y, link_points,
                                               pole_clearance)
     from mixture_ip_ros.robot.scene import POLE_HEIGHT, POLE_RADIUS, POLE_XY
-    from mixture_ip_ros.robot.kinematics import IiwaKinematics
+    from mixture_ip_ros.robot.kinematics import RobotKinematics
     config = _with_default_noise(config or pole_config(), WRIST_OBSERVATION_NOISE)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     demos = prepare(demos, config.subsample)
-    kin = IiwaKinematics()
+    kin = RobotKinematics()
     candidates = [int(k) for k in config.candidates if k <= len(demos) - 1]
     if 1 not in candidates:
         candidates = [1] + candidates
@@ -388,7 +388,8 @@ def evaluate_pole(demos, out_dir: Path, config: EvalConfig = None) -> dict:
     if K == 1 and len(candidates) > 1:
         K = candidates[1 + int(np.argmin(rms[1:].mean(axis=1)))]
     pole_xy, pole_radius, pole_height = np.asarray(POLE_XY, dtype=float), POLE_RADIUS, POLE_HEIGHT
-    hit = pole_radius + LINK_RADIUS          # an arm capsule this close to the pole axis touches it
+    # An arm capsule this close to the pole axis touches it.
+    hit = pole_radius + kin.description.link_radius
 
     def paths_and_hits(Qs):
         paths, hits, clear = [], [], []

@@ -26,6 +26,7 @@ from mixture_ip_ros.core.mixture import (PRIOR_SCALES, MixtureIProMP, calibrated
 from mixture_ip_ros.core.novelty import calibrate as calibrate_novelty
 from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE, bag_layout
 from mixture_ip_ros.io.model_file import save_model
+from mixture_ip_ros.robot.description import load_description
 
 logger = logging.getLogger(__name__)
 
@@ -155,10 +156,11 @@ def _model_params(kwargs) -> dict:
     return {k: v for k, v in kwargs.items() if k in names and k != 'n_components'}
 
 
-def default_layout(demos) -> Layout:
-    """The wrist (3, m) + robot joints (rad) layout of bag demonstrations; any other layout
-    must be named (a model file records every DOF's name and unit)."""
-    layout = bag_layout()
+def default_layout(demos, robot=None) -> Layout:
+    """The layout of bag demonstrations: the wrist (3, m) observed, ``robot``'s joints (rad)
+    controlled; any other layout must be named (a model file records every DOF's name and
+    unit)."""
+    layout = bag_layout(load_description(robot).joint_names)
     d = demos[0]
     if (d.n_observed_dofs, d.n_controlled_dofs) != (len(layout.observed), len(layout.controlled)):
         raise ValueError(f'demonstrations with {d.n_observed_dofs} observed and '
@@ -167,14 +169,17 @@ def default_layout(demos) -> Layout:
     return layout
 
 
-def train_to_file(demos, out_path, layout: Layout = None, observed_frame: str = 'iiwa_link_0',
-                  **kwargs):
+def train_to_file(demos, out_path, layout: Layout = None, observed_frame: str = None, *,
+                  robot=None, **kwargs):
     """:func:`train`, calibrate its novelty test (core.novelty: the evidence of held-out
     demonstrations, for an unsupervised model), then save the model with the layout's names
-    and units (default: the bag layout, for 3 + 7 DOFs) and the training summary. A wrist in metres (the bag layout's
-    observed agent) gets the wrist's observation noise unless ``observation_noise`` is given."""
+    and units and the training summary. By default the layout is the bags' (the wrist, and
+    ``robot``'s joints: a shipped name, a description file or a RobotDescription; None: the
+    iiwa 14) and the observed agent is in the robot's base frame. A wrist in metres gets the
+    wrist's observation noise unless ``observation_noise`` is given."""
     demos = list(demos)
-    layout = (layout or default_layout(demos)).check(demos)
+    robot = load_description(robot)
+    layout = (layout or default_layout(demos, robot)).check(demos)
     if layout.observed == bag_layout().observed and layout.observed_units == ('m',) * 3:
         kwargs.setdefault('observation_noise', WRIST_OBSERVATION_NOISE)
     model, info = train(demos, **kwargs)
@@ -187,6 +192,8 @@ def train_to_file(demos, out_path, layout: Layout = None, observed_frame: str = 
                                               **params).fit(part))
         info['novelty'] = {'prefix': model.novelty_.prefix.round(3).tolist(),
                            'window': round(model.novelty_.window, 3)}
-    save_model(Path(out_path), model, layout=layout, observed_frame=observed_frame,
-               component_labels=component_labels(model, demos), extra={'training': info})
+    save_model(Path(out_path), model, layout=layout,
+               observed_frame=robot.base_frame if observed_frame is None else observed_frame,
+               component_labels=component_labels(model, demos),
+               extra={'training': info, 'robot': robot.name})
     return model, info

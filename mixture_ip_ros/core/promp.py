@@ -201,7 +201,6 @@ class ProMP:
         return np.maximum(num / np.maximum(den, 1), self.min_noise_var)
 
     def _em(self, stats):
-        d = self.mean_.shape[0]
         prev = -np.inf
         for it in range(self.max_iter):
             chol = linalg.cho_factor(self.cov_, lower=True)

@@ -46,10 +46,21 @@ from mixture_ip_ros.nodes.cdr import JointTrajectoryEncoder, PathEncoder
 from mixture_ip_ros.nodes.managed import ManagedNode, run_node
 from mixture_ip_ros.nodes.markers import prediction_markers
 from mixture_ip_ros.nodes.params import autostart_param, finite_list, param, positive
-from mixture_ip_ros.robot.description import BASE_FRAME, JOINT_NAMES
+from mixture_ip_ros.estimation.plans import JointLimits
+from mixture_ip_ros.robot.description import (BASE_FRAME, DEFAULT_ROBOT, JOINT_NAMES,
+                                              shipped_robots)
+from mixture_ip_ros.robot.kinematics import RobotKinematics
 
 N_OBSERVED = 3   # a PointStamped carries x, y, z
 DIAGNOSTIC_NAME = 'estimator_node: estimation'
+
+
+def _catch_up_velocity(kinematics: RobotKinematics) -> list:
+    # Half the limits: a catch-up move must leave room for the plan's own speed on top.
+    return (0.5 * kinematics.velocity_limit).tolist()
+
+
+_DEFAULT_CATCH_UP = _catch_up_velocity(RobotKinematics(DEFAULT_ROBOT))
 
 
 @dataclass
@@ -66,10 +77,15 @@ class EstimatorParameters:
     posterior_topic: str = param('/estimator/posterior', 'std_msgs/Float64MultiArray [p_k.., '
                                                          'alpha, phase, confidence, k]')
     marker_topic: str = param('/estimator/markers', 'visualization_msgs/MarkerArray for RViz')
+    robot: str = param(DEFAULT_ROBOT, 'the robot: a shipped name (' + ', '.join(shipped_robots())
+                       + ') or a description file. It gives the defaults of joint_names, '
+                       'observed_frame and catch_up_velocity, and the joint limits no plan '
+                       'exceeds')
     joint_names: list = param(list(JOINT_NAMES), "the robot's joints; must equal the model's "
-                                                 'controlled names')
-    observed_frame: str = param(BASE_FRAME, 'frame of the observations; must equal the '
-                                            "model's (others are rejected)")
+                                                 'controlled names', from_robot=True)
+    observed_frame: str = param(BASE_FRAME, "frame of the observations (the robot's base "
+                                            "frame); must equal the model's (others are "
+                                            'rejected)', from_robot=True)
     n_alpha: int = param(50, 'phase-speed hypotheses per component', low=1, high=10_000)
     prune_below: float = param(0.0, 'hypotheses (component, phase speed) whose posterior falls '
                                     'below this are no longer updated (faster; a dropped one '
@@ -95,11 +111,10 @@ class EstimatorParameters:
     settle_time: float = param(0.5, 's; the person at rest: the final posture is reached this '
                                     'long after the latest observation', low=0.0, high=60.0,
                                check=positive, rule='> 0')
-    catch_up_velocity: list = param([0.74, 0.74, 0.87, 0.65, 1.13, 1.18, 1.18],
-                                    'rad/s per joint: half the iiwa limits; plan points the '
-                                    'robot cannot reach at these are dropped',
-                                    check=finite_list(positive_values=True),
-                                    rule='one positive speed per joint')
+    catch_up_velocity: list = param(_DEFAULT_CATCH_UP, "rad/s per joint (half the robot's "
+                                    'velocity limits); plan points the robot cannot reach at '
+                                    'these are dropped', check=finite_list(positive_values=True),
+                                    rule='one positive speed per joint', from_robot=True)
     diagnostics_period: float = param(1.0, 's between /diagnostics messages', low=0.001,
                                       high=3600.0)
     hold_window: float = param(2.5, 's of observations held outside an interaction: well over '
@@ -137,6 +152,13 @@ class EstimatorNode(ManagedNode):
         self._sent_any = False
         self._next_markers_ns = 0
 
+    @staticmethod
+    def robot_defaults(robot: str) -> dict:
+        kinematics = RobotKinematics(robot)
+        return {'joint_names': list(kinematics.joint_names),
+                'observed_frame': kinematics.description.base_frame,
+                'catch_up_velocity': _catch_up_velocity(kinematics)}
+
     # -- lifecycle ----------------------------------------------------------------------
     def configure(self) -> None:
         p = self.params
@@ -170,13 +192,23 @@ class EstimatorNode(ManagedNode):
                 f'the novelty thresholds were calibrated with min_interval '
                 f'{novelty.min_interval} s, this node uses {p.min_interval} s: they may refuse '
                 'movements the model knows, or accept others')
+        robot = RobotKinematics(p.robot)
+        if list(p.joint_names) == robot.joint_names:
+            limits = JointLimits(robot.lower, robot.upper, robot.velocity_limit,
+                                 robot.acceleration_limit)
+            self._hand = robot
+        else:
+            limits = self._hand = None
+            self.get_logger().warning(
+                f'joint_names are not the joints of robot {p.robot!r} '
+                f'({", ".join(robot.joint_names)}): plans are not checked against joint limits')
         self.planner = OnlinePlanner(self.estimator, self._planner_settings(p),
                                      labels=meta.get('component_labels'),
-                                     catch_up_velocity=p.catch_up_velocity, novelty=novelty)
+                                     catch_up_velocity=p.catch_up_velocity, novelty=novelty,
+                                     limits=limits)
         self._summary_labels = ','.join(PosteriorSummary.labels(model.n_components))
         self._trajectory_encoder = JointTrajectoryEncoder(p.joint_names)
         self._path_encoder = PathEncoder(p.observed_frame)
-        self._hand = _hand_kinematics(p.joint_names)
         out = qos.reliable(p.output_queue_depth)
         self._traj_pub = self.create_lifecycle_publisher(JointTrajectory, p.trajectory_topic,
                                                          out)
@@ -511,15 +543,6 @@ class EstimatorNode(ManagedNode):
             f'alpha* = {rec.alpha:.3f}/s, committed at phase {rec.commit_phase:.3f}, '
             f'{rec.n_observations} observations used, {rec.plans} plans, '
             f'{len(rec.switches)} switches')
-
-
-def _hand_kinematics(joint_names):
-    """Kinematics for the robot hand's planned path in the markers, when the joints are the
-    robot's (None otherwise: no hand path)."""
-    if list(joint_names) != list(JOINT_NAMES):
-        return None
-    from mixture_ip_ros.robot.kinematics import IiwaKinematics
-    return IiwaKinematics()
 
 
 def main(args=None):

@@ -39,7 +39,7 @@ class ManagedNode(LifecycleNode):
     def __init__(self, name: str, **kwargs):
         super().__init__(name, **kwargs)
         self.refusal = None         # why the last configure or activate failed
-        self.params = declare(self, self.SCHEMA, self.apply_parameters)
+        self.params = declare(self, self.SCHEMA, self.apply_parameters, self.robot_defaults)
         self.add_post_set_parameters_callback(self._log_parameter_change)
 
     # -- to implement -----------------------------------------------------------------
@@ -54,6 +54,11 @@ class ManagedNode(LifecycleNode):
 
     def cleanup(self) -> None:
         pass
+
+    @staticmethod
+    def robot_defaults(robot: str) -> dict:
+        """Defaults of the schema's ``from_robot`` fields for the ``robot`` parameter."""
+        return {}
 
     def apply_parameters(self, changes: dict) -> None:
         """Apply accepted run-time parameter changes {name: value}; ValueError refuses them."""

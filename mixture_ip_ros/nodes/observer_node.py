@@ -31,7 +31,8 @@ from mixture_ip_ros.estimation.pose_check import HumanLimits
 from mixture_ip_ros.nodes import qos
 from mixture_ip_ros.nodes.managed import ManagedNode, run_node
 from mixture_ip_ros.nodes.params import autostart_param, finite_list, param, positive
-from mixture_ip_ros.robot.description import BASE_FRAME
+from mixture_ip_ros.robot.description import (BASE_FRAME, DEFAULT_ROBOT, load_description,
+                                              shipped_robots)
 
 # One source for the segmentation defaults: offline training (segment_motion) uses the same, so
 # time zero agrees online and offline.
@@ -58,13 +59,18 @@ class ObserverParameters:
     observation_topic: str = param('/observer/wrist', 'geometry_msgs/PointStamped, reliable')
     event_topic: str = param('/observer/event', 'std_msgs/Header, frame_id onset | end | gap')
     expected_frame: str = param('world', "poses in another frame are dropped ('' = any)")
-    base_frame: str = param(BASE_FRAME, 'frame of the published points')
+    robot: str = param(DEFAULT_ROBOT, 'the robot: a shipped name (' + ', '.join(shipped_robots())
+                       + ') or a description file. Its base frame and the inverse of its '
+                       'mount are the defaults of base_frame and mocap_to_base_*')
+    base_frame: str = param(BASE_FRAME, 'frame of the published points', from_robot=True)
     mocap_to_base_xyz: list = param([0.0, 0.0, 0.0], 'm; mocap frame origin in the base frame '
                                                      '(p_base = R p_mocap + t)',
-                                    check=finite_list(3), rule='3 finite numbers')
+                                    check=finite_list(3), rule='3 finite numbers',
+                                    from_robot=True)
     mocap_to_base_xyzw: list = param([0.0, 0.0, 0.0, 1.0], 'mocap frame orientation in the base '
                                                            'frame, quaternion x, y, z, w',
-                                     check=_unit_quaternion, rule='a unit quaternion')
+                                     check=_unit_quaternion, rule='a unit quaternion',
+                                     from_robot=True)
     quaternion_tolerance: float = param(0.01, '| |q| - 1 | above this drops the pose',
                                         low=0.0, high=1.0)
     max_clock_offset: float = param(1.0, 's; poses stamped further than this from the node '
@@ -143,6 +149,14 @@ class ObserverNode(ManagedNode):
         self.observer = None
         self._sub = self._timer = None
         self._next_drop_log = 0.0
+
+    @staticmethod
+    def robot_defaults(robot: str) -> dict:
+        description = load_description(robot)
+        to_base = description.world_to_base()
+        return {'base_frame': description.base_frame,
+                'mocap_to_base_xyz': to_base.translation.tolist(),
+                'mocap_to_base_xyzw': [float(v) for v in to_base.quaternion]}
 
     # -- lifecycle ----------------------------------------------------------------------
     def configure(self) -> None:

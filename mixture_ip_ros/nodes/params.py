@@ -3,8 +3,9 @@
 Each field has its default, a description, an optional inclusive range (shown by
 ``ros2 param describe``, enforced by rclpy), an optional rule for what a range cannot say
 (positive, finite, list length...), and whether it may change at run time; the others are
-read-only. :func:`declare` declares them all with ``ParameterDescriptor``s, validates every
-value (from a params file, ``-p``, or ``ros2 param set``) in an on-set-parameters callback, and
+read-only. A field marked ``from_robot`` takes its default from the node's ``robot`` parameter
+(declared before it): the schema's own default is the default robot's. :func:`declare` declares
+them all with ``ParameterDescriptor``s, validates every value (from a params file, ``-p``, or ``ros2 param set``) in an on-set-parameters callback, and
 returns the typed struct the node reads. The same schema renders the README's parameter tables
 and checks the files in ``config/``.
 """
@@ -25,12 +26,13 @@ class Spec:
     dynamic: bool = False              # may change at run time
     check: Optional[Callable[[Any], Optional[str]]] = None   # why a value is wrong, or None
     rule: str = ''                     # what ``check`` requires, for the docs
+    from_robot: bool = False           # the default comes from the robot's description
 
 
 def param(default, description: str, *, low=None, high=None, dynamic: bool = False,
-          check=None, rule: str = ''):
+          check=None, rule: str = '', from_robot: bool = False):
     """A schema field. Lists get a fresh copy per instance."""
-    spec = Spec(description, low, high, dynamic, check, rule)
+    spec = Spec(description, low, high, dynamic, check, rule, from_robot)
     if isinstance(default, list):
         return field(default_factory=lambda: list(default), metadata={'spec': spec})
     return field(default=default, metadata={'spec': spec})
@@ -125,12 +127,15 @@ def descriptor(name: str, default, spec: Spec):
     return d
 
 
-def declare(node, schema, on_change: Callable[[dict], None] = None):
+def declare(node, schema, on_change: Callable[[dict], None] = None,
+            robot_defaults: Callable[[str], dict] = None):
     """Declare every parameter of ``schema`` on ``node`` and return the values as a ``schema``
     instance. Every value is validated (ValueError naming the parameter at start-up, a refused
     ``set`` later). ``on_change(changes)`` applies accepted run-time changes ({name: value} of
-    dynamic parameters) and may raise ValueError to refuse them. Parameters given to the node
-    but not in the schema are warned about (a typo would otherwise be ignored)."""
+    dynamic parameters) and may raise ValueError to refuse them. ``robot_defaults(robot)``
+    gives the defaults of the ``from_robot`` fields once ``robot`` is declared. Parameters
+    given to the node but not in the schema are warned about (a typo would otherwise be
+    ignored)."""
     from rcl_interfaces.msg import SetParametersResult
     from rclpy.exceptions import InvalidParameterValueException
     from rclpy.parameter import Parameter
@@ -161,7 +166,10 @@ def declare(node, schema, on_change: Callable[[dict], None] = None):
 
     node.add_on_set_parameters_callback(validate)
     values = {}
+    derived = {}
     for name, (default, spec) in table.items():
+        if spec.from_robot:
+            default = derived.get(name, default)
         # An empty list carries no element type: such parameters are lists of strings.
         initial = Parameter.Type.STRING_ARRAY if default == [] else default
         try:
@@ -175,6 +183,11 @@ def declare(node, schema, on_change: Callable[[dict], None] = None):
             raise ValueError(f'parameter {name}: {exc}') from None
         if isinstance(default, list):
             values[name] = list(values[name] or [])
+        if name == 'robot' and robot_defaults is not None:
+            try:
+                derived = robot_defaults(values[name])
+            except (ValueError, OSError) as exc:
+                raise ValueError(f'parameter robot: {exc}') from None
     starting[0] = False
     unknown = sorted(set(node._parameter_overrides) - set(table) - set(BUILTIN))
     unknown = [n for n in unknown if not n.startswith('qos_overrides.')]
@@ -189,7 +202,8 @@ def check_params_file(schema, values: dict) -> list:
     missing ones, wrong values)."""
     table = {name: (default, spec) for name, default, spec in specs(schema)}
     out = [f'unknown parameter {n}' for n in sorted(set(values) - set(table) - set(BUILTIN))]
-    out += [f'parameter {n} missing' for n in table if n not in values]
+    out += [f'parameter {n} missing' for n, (_, spec) in table.items()
+            if n not in values and not spec.from_robot]
     for name, value in values.items():
         if name in table:
             why = problem(name, *table[name], value)
@@ -212,7 +226,8 @@ def markdown_table(schema) -> str:
             allowed.append(spec.rule)
         shown = repr(default) if isinstance(default, str) else str(default).replace(
             'True', 'true').replace('False', 'false')
-        cells = [f'`{name}`', f'`{shown}`', '; '.join(allowed), 'yes' if spec.dynamic else '',
+        shown = "the robot's" if spec.from_robot else f'`{shown}`'
+        cells = [f'`{name}`', shown, '; '.join(allowed), 'yes' if spec.dynamic else '',
                  spec.description]
         rows.append('| ' + ' | '.join(c.replace('|', '\\|') for c in cells) + ' |')
     return '\n'.join(rows)

@@ -1,4 +1,8 @@
-"""sim_node: the MuJoCo iiwa 14 with computed-torque control, as a managed node.
+"""sim_node: a MuJoCo arm with computed-torque control, as a managed node.
+
+The arm is the parameter ``robot``: a shipped robot's name (config/robots/) or a robot
+description file; its description gives the defaults of initial_positions, the gains and
+base_frame.
 
 Subscribes  iiwa/joint_trajectory (trajectory_msgs/JointTrajectory, reliable) while active
 Publishes   joint_states (sensor_msgs/JointState), iiwa/flange_pose (geometry_msgs/PoseStamped)
@@ -35,15 +39,20 @@ from mixture_ip_ros.core.stamps import ns_to_parts, seconds_to_ns, stamp_to_ns
 from mixture_ip_ros.nodes import qos
 from mixture_ip_ros.nodes.managed import ManagedNode, run_node
 from mixture_ip_ros.nodes.params import autostart_param, finite_list, param, positive
-from mixture_ip_ros.robot.controller import DEFAULT_NATURAL_FREQUENCY
-from mixture_ip_ros.robot.description import BASE_FRAME
-from mixture_ip_ros.robot.sim import HOME, IiwaSimulation
+from mixture_ip_ros.robot.description import DEFAULT_ROBOT, load_description, shipped_robots
+from mixture_ip_ros.robot.sim import RobotSimulation
 from mixture_ip_ros.robot.trajectory import TrajectoryPoint
+
+_DEFAULT = load_description(DEFAULT_ROBOT)
+PER_JOINT = ('initial_positions', 'natural_frequency', 'damping_ratio')
 
 
 @dataclass
 class SimParameters:
     autostart: bool = autostart_param()
+    robot: str = param(DEFAULT_ROBOT, 'the arm: a shipped name (' + ', '.join(shipped_robots())
+                       + ') or a description file. It gives the defaults of '
+                       'initial_positions, natural_frequency, damping_ratio and base_frame')
     simulated_time: bool = param(True, 'true: ROS time is the simulation time, published on '
                                        '/clock (other nodes: use_sim_time); false: the '
                                        'simulation follows the wall clock')
@@ -56,16 +65,18 @@ class SimParameters:
                                          'callback (more: less overhead, but in-process '
                                          'subscribers may miss JointStates)', low=1,
                                       high=10_000)
-    initial_positions: list = param(HOME.tolist(), 'start configuration (rad), iiwa_joint_1 .. '
-                                                   'iiwa_joint_7', check=finite_list(7),
-                                    rule='7 finite numbers')
-    natural_frequency: list = param([DEFAULT_NATURAL_FREQUENCY] * 7,
+    initial_positions: list = param(_DEFAULT.home_array().tolist(),
+                                    'start configuration (rad), one per joint',
+                                    check=finite_list(), rule='one finite number per joint',
+                                    from_robot=True)
+    natural_frequency: list = param(_DEFAULT.gains()[0].tolist(),
                                     'computed-torque gains per joint: Kp = w^2 (rad/s)',
-                                    check=finite_list(7, positive_values=True),
-                                    rule='7 positive numbers')
-    damping_ratio: list = param([1.0] * 7, 'Kd = 2 zeta w per joint (1 = critically damped)',
-                                check=finite_list(7, positive_values=True),
-                                rule='7 positive numbers')
+                                    check=finite_list(positive_values=True),
+                                    rule='one positive number per joint', from_robot=True)
+    damping_ratio: list = param(_DEFAULT.gains()[1].tolist(),
+                                'Kd = 2 zeta w per joint (1 = critically damped)',
+                                check=finite_list(positive_values=True),
+                                rule='one positive number per joint', from_robot=True)
     controller_mass_scale: float = param(1.0, "scales every link mass and inertia of the "
                                               "controller's model (1 = the true model)",
                                          low=0.0, high=100.0, check=positive, rule='> 0')
@@ -76,7 +87,8 @@ class SimParameters:
                                            'reference; false: from the measured state')
     pole: bool = param(False, 'the pole of the pole-pointing scenario in the scene')
     stands: bool = param(True, 'the plate and screw stands of box assembly in the scene')
-    base_frame: str = param(BASE_FRAME, 'frame of iiwa/flange_pose')
+    base_frame: str = param(_DEFAULT.base_frame, 'frame of iiwa/flange_pose',
+                            from_robot=True)
     max_catch_up: float = param(0.1, 'wall-clock mode: the largest backlog (s) caught up on '
                                      'in one go', low=0.0, high=10.0)
 
@@ -92,6 +104,14 @@ class SimNode(ManagedNode):
         self.trajectory_sub = None
         self._timer = None
 
+    @staticmethod
+    def robot_defaults(robot: str) -> dict:
+        description = load_description(robot)
+        frequency, damping = description.gains()
+        return {'initial_positions': description.home_array().tolist(),
+                'natural_frequency': frequency.tolist(), 'damping_ratio': damping.tolist(),
+                'base_frame': description.base_frame}
+
     @property
     def rejection_count(self) -> int:
         return self.sim.rejection_count
@@ -103,8 +123,13 @@ class SimNode(ManagedNode):
     # -- lifecycle ----------------------------------------------------------------------
     def configure(self) -> None:
         p = self.params
-        self.sim = IiwaSimulation(
-            q0=np.asarray(p.initial_positions), pole=p.pole, stands=p.stands,
+        description = load_description(p.robot)
+        for name in PER_JOINT:
+            if len(getattr(p, name)) != description.dof:
+                raise ValueError(f'parameter {name}: {description.name} has {description.dof} '
+                                 f'joints, got {len(getattr(p, name))} values')
+        self.sim = RobotSimulation(
+            robot=description, q0=np.asarray(p.initial_positions), pole=p.pole, stands=p.stands,
             natural_frequency=np.asarray(p.natural_frequency),
             damping_ratio=np.asarray(p.damping_ratio),
             controller_mass_scale=p.controller_mass_scale,
@@ -136,8 +161,8 @@ class SimNode(ManagedNode):
         self._publish()
         pace = (f'simulated time, real-time factor {p.real_time_factor or "unlimited"}'
                 if p.simulated_time else 'wall-clock time')
-        self.get_logger().info(f'iiwa sim: dt {self.sim.dt * 1e3:.1f} ms, publishing every '
-                               f'{self.publish_period * 1e3:.0f} ms of {pace}')
+        self.get_logger().info(f'{description.name} sim: dt {self.sim.dt * 1e3:.1f} ms, '
+                               f'publishing every {self.publish_period * 1e3:.0f} ms of {pace}')
 
     def activate(self) -> None:
         self.trajectory_sub = self.create_subscription(
@@ -217,9 +242,9 @@ class SimNode(ManagedNode):
         data = self.sim.data
         js = self._joint_state_msg
         js.header.stamp = stamp
-        js.position = data.qpos[:7].tolist()
-        js.velocity = data.qvel[:7].tolist()
-        js.effort = data.ctrl[:7].tolist()
+        js.position = data.qpos.tolist()      # the scene has the arm's joints only, in order
+        js.velocity = data.qvel.tolist()
+        js.effort = data.ctrl.tolist()
         self.joint_state_pub.publish(js)
         pos, quat = self.sim.flange_pose()
         pose = self._pose_msg

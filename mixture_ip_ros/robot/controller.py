@@ -1,4 +1,4 @@
-"""Computed-torque joint control of the iiwa 14 with Pinocchio inverse dynamics."""
+"""Computed-torque joint control of an arm with Pinocchio inverse dynamics."""
 
 from __future__ import annotations
 
@@ -8,18 +8,20 @@ import math
 import numpy as np
 import pinocchio as pin
 
-from mixture_ip_ros.robot.kinematics import IiwaKinematics
-
-DEFAULT_NATURAL_FREQUENCY = 60.0  # rad/s; well below the 1 kHz loop's limit (w dt << 1)
+from mixture_ip_ros.robot.kinematics import RobotKinematics
 
 
-def default_gains(natural_frequency=DEFAULT_NATURAL_FREQUENCY, damping_ratio=1.0, dof: int = 7):
+def default_gains(natural_frequency, damping_ratio, dof: int):
     """Per-joint gains Kp = w^2, Kd = 2 zeta w for error dynamics e'' + Kd e' + Kp e = 0.
 
-    damping_ratio 1 (the default) is critical damping. Scalars apply to every joint.
+    damping_ratio 1 is critical damping. Scalars apply to every joint.
     """
-    w = np.broadcast_to(np.asarray(natural_frequency, dtype=float), (dof,)).copy()
-    z = np.broadcast_to(np.asarray(damping_ratio, dtype=float), (dof,)).copy()
+    try:
+        w = np.broadcast_to(np.asarray(natural_frequency, dtype=float), (dof,)).copy()
+        z = np.broadcast_to(np.asarray(damping_ratio, dtype=float), (dof,)).copy()
+    except ValueError:
+        raise ValueError(f'natural_frequency and damping_ratio must be one or {dof} numbers, '
+                         f'got {natural_frequency!r} and {damping_ratio!r}') from None
     if not np.all(np.isfinite(w)) or np.any(w <= 0):
         raise ValueError(f'natural_frequency must be positive, got {natural_frequency!r}')
     if not np.all(np.isfinite(z)) or np.any(z <= 0):
@@ -36,17 +38,20 @@ class ComputedTorqueController:
     torque is always finite.
     """
 
-    def __init__(self, kinematics: IiwaKinematics, kp=None, kd=None,
-                 natural_frequency=DEFAULT_NATURAL_FREQUENCY, damping_ratio=1.0,
-                 effort_limit=None, logger=None):
-        """Gains: explicit kp/kd (7,) win; otherwise from natural_frequency and damping_ratio.
+    def __init__(self, kinematics: RobotKinematics, kp=None, kd=None,
+                 natural_frequency=None, damping_ratio=None, effort_limit=None, logger=None):
+        """Gains: explicit kp/kd (dof,) win; otherwise from natural_frequency and damping_ratio
+        (None: the robot description's controller gains).
 
         With kp given and kd not, kd is the critically damped 2 sqrt(kp).
         """
         self.kinematics = kinematics
         self._model = kinematics.model
         self._data = self._model.createData()
-        kp0, kd0 = default_gains(natural_frequency, damping_ratio)
+        n = self.dof = kinematics.dof
+        w0, z0 = kinematics.description.gains()
+        kp0, kd0 = default_gains(w0 if natural_frequency is None else natural_frequency,
+                                 z0 if damping_ratio is None else damping_ratio, n)
         self.kp = kp0 if kp is None else self._gain(kp, 'kp')
         if kd is not None:
             self.kd = self._gain(kd, 'kd')
@@ -54,24 +59,26 @@ class ComputedTorqueController:
             self.kd = kd0 if kp is None else 2.0 * np.sqrt(self.kp)
         limit = kinematics.effort_limit if effort_limit is None else effort_limit
         self.effort_limit = np.asarray(limit, dtype=float).copy()
-        if self.effort_limit.shape != (7,) or np.any(~(self.effort_limit > 0)):
-            raise ValueError('effort_limit must be 7 positive numbers')
+        if self.effort_limit.shape != (n,) or np.any(~(self.effort_limit > 0)):
+            raise ValueError(f'effort_limit must be {n} positive numbers')
         self._log = logger if logger is not None else logging.getLogger(__name__).warning
         self.hold_position: np.ndarray | None = None
         self.holding = True
         self._neg_limit = -self.effort_limit
-        self._zero = np.zeros(7)
-        self._last_raw = np.zeros(7)
+        self._zero = np.zeros(n)
+        self._last_raw = np.zeros(n)
         self.fault_count = 0
         self.last_fault: str | None = None
         self._active_fault: str | None = None
-        self._last_safe = np.zeros(7)
+        self._last_safe = np.zeros(n)
 
-    @staticmethod
-    def _gain(value, name):
-        g = np.broadcast_to(np.asarray(value, dtype=float), (7,)).copy()
+    def _gain(self, value, name):
+        try:
+            g = np.broadcast_to(np.asarray(value, dtype=float), (self.dof,)).copy()
+        except ValueError:
+            raise ValueError(f'{name} must be one or {self.dof} numbers, got {value!r}') from None
         if not np.all(np.isfinite(g)) or np.any(g < 0):
-            raise ValueError(f'{name} must be 7 non-negative numbers, got {value!r}')
+            raise ValueError(f'{name} must be {self.dof} non-negative numbers, got {value!r}')
         return g
 
     def _fault(self, reason: str):
@@ -93,7 +100,7 @@ class ComputedTorqueController:
         return bool(np.any(np.abs(self._last_raw) > self.effort_limit))
 
     def compute(self, q, qd, q_ref=None, qd_ref=None, qdd_ref=None) -> np.ndarray:
-        """Joint torques (7,) for the measured state and the reference (None: hold)."""
+        """Joint torques (dof,) for the measured state and the reference (None: hold)."""
         # Fast path for the 1 kHz loop: a NaN or Inf anywhere in the inputs propagates into tau
         # (0 * NaN is NaN), so one check of the result covers them all; anything odd goes
         # through the careful path, which finds the culprit and holds.
@@ -116,7 +123,7 @@ class ComputedTorqueController:
             tau = pin.rnea(self._model, self._data, q, qd, a)
         except (TypeError, ValueError, RuntimeError):
             return None
-        if tau.shape != (7,) or not math.isfinite(tau.dot(tau)):
+        if tau.shape != (self.dof,) or not math.isfinite(tau.dot(tau)):
             return None
         self._active_fault = None
         self._last_raw = tau
@@ -129,11 +136,11 @@ class ComputedTorqueController:
         qd = np.asarray(qd, dtype=float)
         # Finiteness by one dot product per vector: any NaN/Inf (or absurd magnitude) shows up
         # in the sum of squares, at a fraction of the cost of np.isfinite on this 1 kHz path.
-        if q.shape != (7,) or not math.isfinite(q.dot(q)):
+        if q.shape != (self.dof,) or not math.isfinite(q.dot(q)):
             # Nothing to linearise about: repeat the last finite torque.
             self._fault('non-finite joint positions')
             return self._last_safe.copy()
-        if qd.shape != (7,) or not math.isfinite(qd.dot(qd)):
+        if qd.shape != (self.dof,) or not math.isfinite(qd.dot(qd)):
             self._fault('non-finite joint velocities')
             qd = self._zero
             q_ref = None
@@ -141,7 +148,7 @@ class ComputedTorqueController:
             q_ref = np.asarray(q_ref, dtype=float)
             qd_ref = self._zero if qd_ref is None else np.asarray(qd_ref, dtype=float)
             qdd_ref = self._zero if qdd_ref is None else np.asarray(qdd_ref, dtype=float)
-            if not (q_ref.shape == qd_ref.shape == qdd_ref.shape == (7,)
+            if not (q_ref.shape == qd_ref.shape == qdd_ref.shape == (self.dof,)
                     and math.isfinite(q_ref.dot(q_ref) + qd_ref.dot(qd_ref)
                                       + qdd_ref.dot(qdd_ref))):
                 self._fault('non-finite or malformed reference')

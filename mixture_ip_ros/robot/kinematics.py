@@ -1,70 +1,159 @@
-"""KUKA iiwa 14 kinematics and rigid-body dynamics with Pinocchio, from models/iiwa14.urdf."""
+"""Kinematics and rigid-body dynamics of a serial arm with Pinocchio, from its description.
+
+The Pinocchio model is the description's model file with every joint that is not one of the
+description's joints locked at zero (e.g. a gripper's fingers), so its configuration is exactly
+the controlled joints, in the description's order. Everything is in the robot's base frame;
+gravity points along the scene's -z seen from the base (the mount may tilt the base).
+"""
 
 from __future__ import annotations
 
-from pathlib import Path
+import functools
 
 import numpy as np
 import pinocchio as pin
 
-from mixture_ip_ros.core.share import model_path
+from mixture_ip_ros.robot.description import DescriptionError, RobotDescription, load_description
 
-from mixture_ip_ros.robot.description import FLANGE_FRAME, JOINT_NAMES, URDF_NAME
-
-
-def _as_q(q, name='q') -> np.ndarray:
-    q = np.asarray(q, dtype=float)
-    if q.shape != (7,):
-        raise ValueError(f'{name} must have shape (7,), got {q.shape}')
-    return q
+GRAVITY = 9.81
 
 
-class IiwaKinematics:
-    """Pinocchio model of the iiwa 14: forward kinematics, IK, mass matrix and inverse dynamics.
+def load_arm_model(description: RobotDescription) -> pin.Model:
+    """The description's model reduced to its joints, checked against the description.
 
+    Raises DescriptionError when the model does not fit: a joint missing or not a 1-DOF
+    revolute/prismatic joint, the joints not being the chain from the base frame to the flange
+    frame in order, a limit missing, the home posture outside the limits.
+    """
+    where = f'robot {description.name!r} ({description.model_path})'
+    path = str(description.model_path)
+    try:
+        if description.model_path.suffix.lower() == '.urdf':
+            full = pin.buildModelFromUrdf(path)
+        else:
+            full = pin.buildModelFromMJCF(path)
+    except (RuntimeError, ValueError) as exc:
+        raise DescriptionError(f'{where}: Pinocchio cannot load the model: {exc}') from exc
+    names = [full.names[i] for i in range(1, full.njoints)]
+    for name in description.joint_names:
+        if name not in names:
+            raise DescriptionError(f'{where}: no joint {name!r}; the model has {names}')
+        joint = full.joints[full.getJointId(name)]
+        if joint.nq != 1 or joint.nv != 1:
+            raise DescriptionError(f'{where}: joint {name!r} is not a 1-DOF revolute or '
+                                   f'prismatic joint ({joint.shortname()})')
+    lock = [full.getJointId(n) for n in names if n not in description.joint_names]
+    model = pin.buildReducedModel(full, lock, pin.neutral(full)) if lock else full
+    kept = [model.names[i] for i in range(1, model.njoints)]
+    if kept != list(description.joint_names):
+        raise DescriptionError(f'{where}: joints must be listed in chain order {kept}, got '
+                               f'{list(description.joint_names)}')
+    for field, frame in (('base_frame', description.base_frame),
+                         ('flange_frame', description.flange_frame)):
+        if not model.existFrame(frame):
+            raise DescriptionError(f'{where}: {field} {frame!r} is not a frame of the model')
+    base = model.frames[model.getFrameId(description.base_frame)]
+    if base.parentJoint != 0 or not base.placement.isIdentity(1e-9):
+        raise DescriptionError(
+            f'{where}: base_frame {description.base_frame!r} must be the model\'s root frame '
+            '(fixed, at the origin of the model); place the arm with mount instead')
+    flange = model.frames[model.getFrameId(description.flange_frame)]
+    chain = [model.names[j] for j in model.supports[flange.parentJoint][1:]]
+    if chain != list(description.joint_names):
+        raise DescriptionError(f'{where}: the flange frame {description.flange_frame!r} hangs '
+                               f'on the joints {chain}, not on {list(description.joint_names)}: '
+                               'the joints must be the serial chain from base to flange')
+    lower, upper = model.lowerPositionLimit, model.upperPositionLimit
+    for label, values in (('velocity', model.velocityLimit), ('effort', model.effortLimit)):
+        bad = [n for n, v in zip(description.joint_names, values) if not (0 < v < np.inf)]
+        if bad:
+            raise DescriptionError(f'{where}: joints {bad} have no positive finite {label} '
+                                   'limit in the model file')
+    if not (np.all(np.isfinite(lower)) and np.all(np.isfinite(upper))
+            and np.all(lower < upper)):
+        raise DescriptionError(f'{where}: every joint needs finite position limits')
+    for label, q in (('home', description.home), ('scenarios.box_seed', description.box_seed),
+                     ('scenarios.pole_home', description.pole_home)):
+        if q is not None and not (np.all(np.asarray(q) >= lower)
+                                  and np.all(np.asarray(q) <= upper)):
+            raise DescriptionError(f'{where}: {label} {list(q)} is outside the joint limits '
+                                   f'{lower.tolist()} .. {upper.tolist()}')
+    for frame in description.clearance_frames:
+        if not model.existFrame(frame):
+            raise DescriptionError(f'{where}: scenarios.clearance_frames: no frame {frame!r}')
+    model.gravity.linear = description.mount_rotation.T @ np.array([0.0, 0.0, -GRAVITY])
+    return model
+
+
+class RobotKinematics:
+    """Pinocchio model of an arm: forward kinematics, IK, mass matrix and inverse dynamics.
+
+    ``robot``: a description, a shipped name or a description file (None: the default iiwa 14).
     mass_scale multiplies every link's mass and rotational inertia (centres of mass unchanged);
     it exists to build a deliberately wrong controller model for robustness tests.
     """
 
-    def __init__(self, urdf_path: str | Path | None = None, mass_scale: float = 1.0):
-        path = Path(urdf_path) if urdf_path is not None else model_path(URDF_NAME)
-        if not path.is_file():
-            raise ValueError(f'URDF not found: {path}')
+    def __init__(self, robot=None, mass_scale: float = 1.0):
+        self.description = load_description(robot)
         if not (np.isfinite(mass_scale) and mass_scale > 0):
             raise ValueError(f'mass_scale must be a positive number, got {mass_scale}')
-        self.model = pin.buildModelFromUrdf(str(path))
-        names = [self.model.names[i] for i in range(1, self.model.njoints)]
-        if names != list(JOINT_NAMES):
-            raise ValueError(f'{path} has joints {names}, expected {JOINT_NAMES}')
+        self.model = load_arm_model(self.description)
         if mass_scale != 1.0:
             for i in range(1, self.model.njoints):
                 inertia = self.model.inertias[i]
                 self.model.inertias[i] = pin.Inertia(
                     inertia.mass * mass_scale, inertia.lever, inertia.inertia * mass_scale)
         self.data = self.model.createData()
-        self.joint_names = list(JOINT_NAMES)
+        self.joint_names = list(self.description.joint_names)
+        self.dof = self.model.nv
         self.lower = np.array(self.model.lowerPositionLimit, dtype=float)
         self.upper = np.array(self.model.upperPositionLimit, dtype=float)
         self.velocity_limit = np.array(self.model.velocityLimit, dtype=float)
         self.effort_limit = np.array(self.model.effortLimit, dtype=float)
-        self.flange_id = self.model.getFrameId(FLANGE_FRAME)
-        if self.flange_id >= len(self.model.frames):
-            raise ValueError(f'{path} has no frame {FLANGE_FRAME!r}')
+        self.flange_id = self.model.getFrameId(self.description.flange_frame)
         self.mass_scale = float(mass_scale)
+
+    @functools.cached_property
+    def acceleration_limit(self) -> np.ndarray:
+        """rad/s^2 per joint that the arm reaches everywhere: the acceleration joint j alone gets
+        from its full effort, less what holds the arm against gravity, at the posture where
+        that is least, (tau_max_j - |g_j(q)|) / M_jj(q) (URDFs carry no acceleration limits; a
+        datasheet's, where there is one, are lower). Over the home posture and 200 postures
+        drawn uniformly inside the limits (seeded: the same every time)."""
+        rng = np.random.default_rng(0)
+        postures = [np.asarray(self.description.home, dtype=float)]
+        postures += list(rng.uniform(self.lower, self.upper, (200, self.dof)))
+        out = np.full(self.dof, np.inf)
+        for q in postures:
+            M = self.mass_matrix(q)
+            free = self.effort_limit - np.abs(self.gravity(q))
+            out = np.minimum(out, np.maximum(free, 0.05 * self.effort_limit) / np.diag(M))
+        return out
+
+    def _as_q(self, q, name='q') -> np.ndarray:
+        q = np.asarray(q, dtype=float)
+        if q.shape != (self.dof,):
+            raise ValueError(f'{name} must have shape ({self.dof},), got {q.shape}')
+        return q
+
+    def frame_positions(self, q, frames) -> np.ndarray:
+        """Origins (len(frames), 3) of the named frames at q, base frame."""
+        pin.framesForwardKinematics(self.model, self.data, self._as_q(q))
+        return np.array([self.data.oMf[self.model.getFrameId(f)].translation for f in frames])
 
     # ------------------------------------------------------------------ kinematics
     def fk(self, q) -> tuple[np.ndarray, np.ndarray]:
-        """Flange (tool0) position (3,) and rotation (3, 3) in the base frame iiwa_link_0."""
-        q = _as_q(q)
+        """Flange position (3,) and rotation (3, 3) in the base frame."""
+        q = self._as_q(q)
         pin.framesForwardKinematics(self.model, self.data, q)
         placement = self.data.oMf[self.flange_id]
         return placement.translation.copy(), placement.rotation.copy()
 
     def fk_positions(self, Q) -> np.ndarray:
-        """Flange positions (n, 3) for joint configurations Q (n, 7)."""
+        """Flange positions (n, 3) for joint configurations Q (n, dof)."""
         Q = np.asarray(Q, dtype=float)
-        if Q.ndim != 2 or Q.shape[1] != 7:
-            raise ValueError(f'Q must have shape (n, 7), got {Q.shape}')
+        if Q.ndim != 2 or Q.shape[1] != self.dof:
+            raise ValueError(f'Q must have shape (n, {self.dof}), got {Q.shape}')
         out = np.empty((Q.shape[0], 3))
         for i, q in enumerate(Q):
             pin.forwardKinematics(self.model, self.data, q)
@@ -73,13 +162,13 @@ class IiwaKinematics:
         return out
 
     def jacobian(self, q) -> np.ndarray:
-        """Flange Jacobian (6, 7), linear rows first, in the base-aligned frame at the flange."""
-        q = _as_q(q)
+        """Flange Jacobian (6, dof), linear rows first, in the base-aligned frame at the flange."""
+        q = self._as_q(q)
         return pin.computeFrameJacobian(
             self.model, self.data, q, self.flange_id, pin.LOCAL_WORLD_ALIGNED).copy()
 
     def within_limits(self, q, margin: float = 0.0) -> bool:
-        q = _as_q(q)
+        q = self._as_q(q)
         return bool(np.all(q >= self.lower + margin) and np.all(q <= self.upper - margin))
 
     # ------------------------------------------------------------------ inverse kinematics
@@ -101,7 +190,7 @@ class IiwaKinematics:
         target = np.asarray(position, dtype=float)
         if target.shape != (3,) or not np.all(np.isfinite(target)):
             raise ValueError(f'position must be 3 finite numbers, got {position!r}')
-        q0 = _as_q(q0, 'q0')
+        q0 = self._as_q(q0, 'q0')
         if not np.all(np.isfinite(q0)):
             raise ValueError('q0 must be finite')
         R_target = None
@@ -156,7 +245,7 @@ class IiwaKinematics:
                 J[3:] *= w_rot
             # Damping grows with the error: Gauss-Newton near the solution, gradient-like far away.
             lam = 1e-6 + 0.5 * cost
-            free = np.ones(7, dtype=bool)
+            free = np.ones(self.dof, dtype=bool)
             for _attempt in range(3):
                 Jf = J * free
                 dq = Jf.T @ np.linalg.solve(Jf @ Jf.T + lam * np.eye(rows), e)
@@ -191,15 +280,16 @@ class IiwaKinematics:
 
     # ------------------------------------------------------------------ dynamics
     def mass_matrix(self, q) -> np.ndarray:
-        """Joint-space mass matrix M(q) (7, 7), symmetric."""
-        q = _as_q(q)
+        """Joint-space mass matrix M(q) (dof, dof), symmetric."""
+        q = self._as_q(q)
         M = pin.crba(self.model, self.data, q)
         return np.triu(M) + np.triu(M, 1).T
 
     def rnea(self, q, qd, qdd) -> np.ndarray:
-        """Inverse dynamics tau = M(q) qdd + C(q, qd) qd + g(q) (7,)."""
-        return pin.rnea(self.model, self.data, _as_q(q), _as_q(qd, 'qd'), _as_q(qdd, 'qdd')).copy()
+        """Inverse dynamics tau = M(q) qdd + C(q, qd) qd + g(q) (dof,)."""
+        return pin.rnea(self.model, self.data, self._as_q(q), self._as_q(qd, 'qd'),
+                        self._as_q(qdd, 'qdd')).copy()
 
     def gravity(self, q) -> np.ndarray:
-        """Gravity torque g(q) (7,)."""
-        return pin.computeGeneralizedGravity(self.model, self.data, _as_q(q)).copy()
+        """Gravity torque g(q) (dof,)."""
+        return pin.computeGeneralizedGravity(self.model, self.data, self._as_q(q)).copy()

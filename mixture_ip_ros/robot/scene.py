@@ -1,18 +1,17 @@
-"""MuJoCo scene built from models/iiwa14.urdf: torque actuators, table, stands, optional pole.
+"""MuJoCo scene: an arm from its description with torque actuators, table, stands, optional pole.
 
-The world frame is the robot base frame iiwa_link_0; the robot stands on the table top (z = 0).
-The human stands across the table, at +x. Everything here is in metres, base frame.
+The world frame is the scene's: the table top is z = 0, the human stands across the table at +x,
+and the default robot (the iiwa 14) stands at the origin. Another arm stands where its
+description's mount puts its base frame (on a pedestal when raised). Everything here is in
+metres, world frame; robot/sim.py speaks the robot's base frame.
 """
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import mujoco
 import numpy as np
 
-from mixture_ip_ros.core.share import model_path
-from mixture_ip_ros.robot.description import FLANGE_FRAME, JOINT_NAMES, URDF_NAME
+from mixture_ip_ros.robot.description import RobotDescription, load_description, resolve_uri
 
 TIMESTEP = 0.001
 TABLE_TOP_Z = 0.0
@@ -36,8 +35,8 @@ POLE_HEIGHT = 0.8
 
 HUMAN_WRIST = 'human_wrist'
 HUMAN_WRIST_DEFAULT = (1.0, 0.0, 0.3)
-FLANGE_SITE = FLANGE_FRAME
-ACTUATOR_NAMES = [f'{name}_torque' for name in JOINT_NAMES]
+FLANGE_SITE = 'flange'
+PEDESTAL_RADIUS = 0.09
 
 # Contact filtering: robot geoms touch the environment but not each other (self-collision of the
 # simplified geometry would be spurious); environment geoms are static and never touch each other.
@@ -68,48 +67,94 @@ def _static_geom(body, name, gtype, size, pos, rgba, collide=True, quat=None):
     return geom
 
 
-def build_spec(pole: bool = False, stands: bool = True, table: bool = True,
-               pole_xy=POLE_XY, pole_radius: float = POLE_RADIUS, pole_height: float = POLE_HEIGHT,
-               plate_stand_xy=PLATE_STAND_XY, screw_stand_xy=SCREW_STAND_XY,
-               timestep: float = TIMESTEP, urdf_path: str | Path | None = None) -> mujoco.MjSpec:
-    """The scene as an MjSpec, for callers that want to add things before compiling."""
-    path = Path(urdf_path) if urdf_path is not None else model_path(URDF_NAME)
-    if not path.is_file():
-        raise ValueError(f'URDF not found: {path}')
-    if not (timestep > 0 and np.isfinite(timestep)):
-        raise ValueError(f'timestep must be positive, got {timestep}')
-    if pole and not (pole_radius > 0 and pole_height > 0):
-        raise ValueError('pole_radius and pole_height must be positive')
-    spec = mujoco.MjSpec.from_file(str(path))
-    spec.compiler.discardvisual = False   # keep the visual-only geoms (floor, legs, objects)
-    # Keep tool0 (massless, fixed) as its own body so the flange site has a home.
+def actuator_names(robot=None) -> list:
+    """The torque actuators' names, one per joint in the description's order."""
+    return [f'{name}_torque' for name in load_description(robot).joint_names]
+
+
+def _mount_robot(spec: mujoco.MjSpec, description: RobotDescription) -> None:
+    """Put the model's root (its base frame, robot.kinematics checks) at the description's mount:
+    the top-level bodies move with it."""
+    R = description.mount_rotation
+    t = np.asarray(description.mount_xyz, dtype=float)
+    q_mount = np.empty(4)
+    mujoco.mju_mat2Quat(q_mount, R.ravel())
+    for body in spec.worldbody.bodies:
+        body.pos = (R @ np.asarray(body.pos, dtype=float) + t).tolist()
+        quat = np.empty(4)
+        mujoco.mju_mulQuat(quat, q_mount, np.asarray(body.quat, dtype=float))
+        body.quat = quat.tolist()
+
+
+def _arm_spec(description: RobotDescription, effort_limit) -> mujoco.MjSpec:
+    """The description's model as an MjSpec: only its joints movable (others welded at zero),
+    meshes found, no damping/friction/armature, a torque motor per joint, a site at the flange."""
+    path = description.model_path
+    try:
+        spec = mujoco.MjSpec.from_file(str(path))
+    except Exception as exc:
+        raise ValueError(f'MuJoCo cannot load {path}: {exc}') from exc
+    for mesh in spec.meshes:
+        if mesh.file.startswith('package://'):
+            mesh.file = str(resolve_uri(mesh.file))
+    keep = set(description.joint_names)
+    # Joints that are not the arm's (a gripper's fingers) are welded at zero, as Pinocchio's
+    # reduced model locks them; constraints and actuators that use them go with them.
+    dropped = {j.name for j in spec.joints if j.name not in keep}
+    for equality in list(spec.equalities):
+        if equality.name1 in dropped or equality.name2 in dropped:
+            spec.delete(equality)
+    for joint in list(spec.joints):
+        if joint.name in dropped:
+            spec.delete(joint)
+    for actuator in list(spec.actuators):
+        spec.delete(actuator)
+    # Keep fixed links (the flange) as bodies so the flange site has a home.
     spec.compiler.fusestatic = False
-    spec.modelname = 'iiwa14_scene'
-    spec.option.timestep = timestep
     # No joint damping or armature anywhere: the controller's Pinocchio model mirrors this exactly.
     for joint in spec.joints:
         joint.damping = [0.0, 0.0, 0.0]
         joint.armature = 0.0
         joint.frictionloss = 0.0
-
+    accent = set(description.accent_links)
     for geom in spec.geoms:
         geom.contype = ROBOT_CONTYPE
         geom.conaffinity = ROBOT_CONAFFINITY
-        link = geom.parent.name
-        orange = link in ('iiwa_link_2', 'iiwa_link_4', 'iiwa_link_6')
-        geom.rgba = list(_ORANGE if orange else _GREY)
-
-    flange = spec.body(FLANGE_FRAME)
+        geom.rgba = list(_ORANGE if geom.parent.name in accent else _GREY)
+    flange = spec.body(description.flange_frame)
+    if flange is None:
+        raise ValueError(f'{path}: flange_frame {description.flange_frame!r} is not a link')
     flange.add_site(name=FLANGE_SITE, size=[0.01, 0, 0], rgba=[0.1, 0.1, 0.9, 1])
-
-    limits = {j.name: j.actfrcrange[1] for j in spec.joints}
-    for name, actuator_name in zip(JOINT_NAMES, ACTUATOR_NAMES):
-        effort = float(limits[name])
+    for name, actuator_name, effort in zip(description.joint_names,
+                                           actuator_names(description), effort_limit):
         act = spec.add_actuator(name=actuator_name, target=name)
         act.trntype = mujoco.mjtTrn.mjTRN_JOINT
         act.set_to_motor()
         act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
-        act.ctrlrange = [-effort, effort]
+        act.ctrlrange = [-float(effort), float(effort)]
+    _mount_robot(spec, description)
+    return spec
+
+
+def build_spec(pole: bool = False, stands: bool = True, table: bool = True,
+               pole_xy=POLE_XY, pole_radius: float = POLE_RADIUS, pole_height: float = POLE_HEIGHT,
+               plate_stand_xy=PLATE_STAND_XY, screw_stand_xy=SCREW_STAND_XY,
+               timestep: float = TIMESTEP, robot=None) -> mujoco.MjSpec:
+    """The scene as an MjSpec, for callers that want to add things before compiling.
+
+    ``robot``: a description, a shipped robot's name or a description file (None: the iiwa 14).
+    """
+    from mixture_ip_ros.robot.kinematics import load_arm_model
+    description = load_description(robot)
+    if not (timestep > 0 and np.isfinite(timestep)):
+        raise ValueError(f'timestep must be positive, got {timestep}')
+    if pole and not (pole_radius > 0 and pole_height > 0):
+        raise ValueError('pole_radius and pole_height must be positive')
+    # Effort limits as Pinocchio reads them from the model (one reading of the limits).
+    spec = _arm_spec(description, load_arm_model(description).effortLimit)
+    spec.compiler.discardvisual = False   # keep the visual-only geoms (floor, legs, objects)
+    spec.modelname = f'{description.name}_scene'
+    spec.option.timestep = timestep
 
     world = spec.worldbody
     world.add_light(name='sun', pos=[0.5, -0.5, 2.5], dir=[0, 0.3, -1], castshadow=False)
@@ -145,11 +190,18 @@ def build_spec(pole: bool = False, stands: bool = True, table: bool = True,
         _static_geom(world, 'pole', mujoco.mjtGeom.mjGEOM_CYLINDER, (pole_radius, pole_height / 2),
                      (pole_xy[0], pole_xy[1], TABLE_TOP_Z + pole_height / 2), (0.2, 0.5, 0.9, 1))
 
+    height = description.mount_xyz[2] - TABLE_TOP_Z
+    if height > 1e-3:
+        x, y = description.mount_xyz[:2]
+        _static_geom(world, 'robot_pedestal', mujoco.mjtGeom.mjGEOM_CYLINDER,
+                     (PEDESTAL_RADIUS, height / 2), (x, y, TABLE_TOP_Z + height / 2),
+                     (0.3, 0.3, 0.35, 1), collide=False)
+
     wrist = world.add_body(name=HUMAN_WRIST, mocap=True, pos=list(HUMAN_WRIST_DEFAULT))
     wrist.add_site(name=HUMAN_WRIST, size=[0.03, 0, 0], rgba=[0.9, 0.2, 0.2, 0.8])
     return spec
 
 
 def build_scene(pole: bool = False, stands: bool = True, **kwargs) -> mujoco.MjModel:
-    """Compiled MuJoCo model of the iiwa 14 scene; see build_spec for the options."""
+    """Compiled MuJoCo model of the scene; see build_spec for the options."""
     return build_spec(pole=pole, stands=stands, **kwargs).compile()

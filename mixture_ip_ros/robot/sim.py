@@ -1,4 +1,4 @@
-"""The iiwa 14 in MuJoCo at 1 kHz with the computed-torque controller in the loop, without ROS."""
+"""An arm in MuJoCo at 1 kHz with the computed-torque controller in the loop, without ROS."""
 
 from __future__ import annotations
 
@@ -8,42 +8,44 @@ from typing import Sequence
 import mujoco
 import numpy as np
 
-from mixture_ip_ros.robot.controller import DEFAULT_NATURAL_FREQUENCY, ComputedTorqueController
-from mixture_ip_ros.robot.description import JOINT_NAMES
-from mixture_ip_ros.robot.kinematics import IiwaKinematics
+from mixture_ip_ros.robot.controller import ComputedTorqueController
+from mixture_ip_ros.robot.kinematics import RobotKinematics
 from mixture_ip_ros.robot.scene import FLANGE_SITE, HUMAN_WRIST, build_scene
 from mixture_ip_ros.robot.trajectory import (TrajectoryFollower, TrajectoryPoint,
                                              validate_trajectory)
 
-# Arm bent forward over the table, flange about 0.6 m in front at 0.4 m height, pointing down.
-HOME = np.array([0.0, 0.6, 0.0, -1.4, 0.0, 1.1, 0.0])
 
-
-class IiwaSimulation:
+class RobotSimulation:
     """MuJoCo model + data, trajectory follower and controller, stepped at the model timestep.
 
+    ``robot``: a description, a shipped robot's name or a description file (None: the iiwa 14).
+    q0 defaults to the description's home posture; gains default to its controller section.
     controller_mass_scale != 1 gives the controller a deliberately wrong Pinocchio model (all link
-    masses and inertias scaled) while MuJoCo keeps the true one.
+    masses and inertias scaled) while MuJoCo keeps the true one. Positions and poses in and out
+    are in the robot's base frame (the scene's world frame differs by the description's mount).
     """
 
     def __init__(self, q0=None, pole: bool = False, stands: bool = True, model=None,
-                 natural_frequency=DEFAULT_NATURAL_FREQUENCY, damping_ratio=1.0, kp=None, kd=None,
+                 natural_frequency=None, damping_ratio=None, kp=None, kd=None,
                  controller_mass_scale: float = 1.0, allow_partial_joints_goal: bool = False,
                  allow_nonzero_velocity_at_trajectory_end: bool = False,
-                 open_loop_control: bool = False, logger=None, **scene_kwargs):
-        self.model = model if model is not None else build_scene(pole=pole, stands=stands,
-                                                                 **scene_kwargs)
+                 open_loop_control: bool = False, logger=None, robot=None, **scene_kwargs):
+        self.kinematics = RobotKinematics(robot)
+        self.description = description = self.kinematics.description
+        self.model = model if model is not None else build_scene(
+            pole=pole, stands=stands, robot=description, **scene_kwargs)
         self.data = mujoco.MjData(self.model)
         self.dt = float(self.model.opt.timestep)
-        self.joint_names = list(JOINT_NAMES)
-        self.kinematics = IiwaKinematics()
-        self.controller_kinematics = (self.kinematics if controller_mass_scale == 1.0
-                                      else IiwaKinematics(mass_scale=controller_mass_scale))
+        self.joint_names = list(description.joint_names)
+        n = self.dof = len(self.joint_names)
+        self.controller_kinematics = (
+            self.kinematics if controller_mass_scale == 1.0
+            else RobotKinematics(description, mass_scale=controller_mass_scale))
         self._log = logger if logger is not None else logging.getLogger(__name__).warning
         self.controller = ComputedTorqueController(
             self.controller_kinematics, kp=kp, kd=kd, natural_frequency=natural_frequency,
             damping_ratio=damping_ratio, logger=self._log)
-        self.follower = TrajectoryFollower(7, open_loop=open_loop_control)
+        self.follower = TrajectoryFollower(n, open_loop=open_loop_control)
         self.allow_partial_joints_goal = allow_partial_joints_goal
         self.allow_nonzero_velocity_at_trajectory_end = allow_nonzero_velocity_at_trajectory_end
         self.rejection_count = 0
@@ -52,12 +54,16 @@ class IiwaSimulation:
         self.reference: tuple | None = None
         self._flange_site = self.model.site(FLANGE_SITE).id
         self._wrist_mocap = int(self.model.body(HUMAN_WRIST).mocapid[0])
-        qadr = [self.model.joint(n).qposadr[0] for n in JOINT_NAMES]
-        vadr = [self.model.joint(n).dofadr[0] for n in JOINT_NAMES]
-        if not (self.model.nq == self.model.nv == self.model.nu == 7
-                and qadr == list(range(7)) and vadr == list(range(7))):
-            raise ValueError('the scene must have exactly the 7 iiwa joints and their actuators')
-        self.set_state(HOME if q0 is None else q0)
+        qadr = [self.model.joint(name).qposadr[0] for name in self.joint_names]
+        vadr = [self.model.joint(name).dofadr[0] for name in self.joint_names]
+        if not (self.model.nq == self.model.nv == self.model.nu == n
+                and qadr == list(range(n)) and vadr == list(range(n))):
+            raise ValueError(f'the scene must have exactly the {n} joints of '
+                             f'{description.name} and their actuators')
+        self._to_world = description.base_to_world()
+        self._to_base = description.world_to_base()
+        self.reset_tracking()
+        self.set_state(description.home_array() if q0 is None else q0)
 
     # ------------------------------------------------------------------ state
     @property
@@ -66,28 +72,29 @@ class IiwaSimulation:
 
     @property
     def q(self) -> np.ndarray:
-        return self.data.qpos[:7].copy()
+        return self.data.qpos.copy()
 
     @property
     def qd(self) -> np.ndarray:
-        return self.data.qvel[:7].copy()
+        return self.data.qvel.copy()
 
     @property
     def tau(self) -> np.ndarray:
         """Torques applied during the last step."""
-        return self.data.ctrl[:7].copy()
+        return self.data.ctrl.copy()
 
     def set_state(self, q, qd=None, time: float | None = None) -> None:
         """Reset the simulation to (q, qd); drops any trajectory and holds at q."""
+        n = self.dof
         q = np.asarray(q, dtype=float)
-        if q.shape != (7,) or not np.all(np.isfinite(q)):
-            raise ValueError(f'q must be 7 finite numbers, got {q!r}')
-        qd = np.zeros(7) if qd is None else np.asarray(qd, dtype=float)
-        if qd.shape != (7,) or not np.all(np.isfinite(qd)):
-            raise ValueError('qd must be 7 finite numbers')
+        if q.shape != (n,) or not np.all(np.isfinite(q)):
+            raise ValueError(f'q must be {n} finite numbers, got {q!r}')
+        qd = np.zeros(n) if qd is None else np.asarray(qd, dtype=float)
+        if qd.shape != (n,) or not np.all(np.isfinite(qd)):
+            raise ValueError(f'qd must be {n} finite numbers')
         mujoco.mj_resetData(self.model, self.data)
-        self.data.qpos[:7] = q
-        self.data.qvel[:7] = qd
+        self.data.qpos[:] = q
+        self.data.qvel[:] = qd
         if time is not None:
             self.data.time = float(time)
         mujoco.mj_forward(self.model, self.data)
@@ -95,11 +102,28 @@ class IiwaSimulation:
         self.controller.reset_hold(q)
         self.reference = None
 
+    # ------------------------------------------------------------------ tracking
+    def reset_tracking(self) -> None:
+        """Start a new tracking tally (see tracking_error)."""
+        self._track_sq = 0.0
+        self._track_max = 0.0
+        self._track_steps = 0
+
+    def tracking_error(self) -> dict:
+        """Joint tracking error since reset_tracking, over the steps that followed a trajectory:
+        {'rms': sqrt of the mean over steps and joints of (q_ref - q)^2 (rad), 'max': largest
+        |q_ref - q| (rad), 'steps': how many steps}. q_ref is the reference the controller was
+        sampled at the step's start time, q the measured position at that time."""
+        steps = self._track_steps
+        rms = float(np.sqrt(self._track_sq / (steps * self.dof))) if steps else None
+        return {'rms': rms, 'max': self._track_max if steps else None, 'steps': steps}
+
     def flange_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """Flange position (3,) and quaternion (w, x, y, z) in the base frame, from MuJoCo."""
-        pos = self.data.site_xpos[self._flange_site].copy()
+        pos = self._to_base.apply_array(self.data.site_xpos[self._flange_site])
+        R = self._to_base.rotation @ self.data.site_xmat[self._flange_site].reshape(3, 3)
         quat = np.empty(4)
-        mujoco.mju_mat2Quat(quat, self.data.site_xmat[self._flange_site])
+        mujoco.mju_mat2Quat(quat, R.ravel())
         return pos, quat
 
     def set_wrist(self, position) -> None:
@@ -107,7 +131,7 @@ class IiwaSimulation:
         p = np.asarray(position, dtype=float)
         if p.shape != (3,) or not np.all(np.isfinite(p)):
             raise ValueError('wrist position must be 3 finite numbers')
-        self.data.mocap_pos[self._wrist_mocap] = p
+        self.data.mocap_pos[self._wrist_mocap] = self._to_world.apply_array(p)
 
     # ------------------------------------------------------------------ commands
     def set_trajectory(self, joint_names: Sequence[str], points: Sequence[TrajectoryPoint],
@@ -141,10 +165,12 @@ class IiwaSimulation:
         """Advance n control steps of dt: sample the reference, compute torques, step MuJoCo."""
         model, data = self.model, self.data
         follower, controller = self.follower, self.controller
-        # The scene has exactly the 7 arm joints, so qpos/qvel are the arm state (no slicing).
+        # The scene has exactly the arm's joints, so qpos/qvel are the arm state (no slicing).
         q = data.qpos
         qd = data.qvel
         ctrl = data.ctrl
+        # Tracking tally in locals (written back once): this loop runs at 1 kHz.
+        track_sq, track_max, track_steps = 0.0, self._track_max, 0
         for _ in range(int(n)):
             ref = follower.sample(data.time, q, qd)
             self.reference = ref
@@ -152,5 +178,16 @@ class IiwaSimulation:
                 tau = controller.compute(q, qd)
             else:
                 tau = controller.compute(q, qd, *ref)
+                err = ref[0] - q
+                sq = err.dot(err)
+                track_sq += sq
+                track_steps += 1
+                # max |e_j| <= |e|: the norm rules out a new maximum cheaply; the exact maximum
+                # only when it may be one.
+                if sq > track_max * track_max:
+                    track_max = max(track_max, float(np.abs(err).max()))
             ctrl[:] = tau
             mujoco.mj_step(model, data)
+        self._track_sq += track_sq
+        self._track_max = track_max
+        self._track_steps += track_steps

@@ -1,10 +1,20 @@
 """Seeded, reproducible demonstration sets that mirror the thesis's experiments.
 
-Scene (robot base frame iiwa_link_0, metres, the frame of robot/scene.py): the KUKA iiwa 14 stands at
-the origin on the table top (z = 0), facing +x. The human stands across the table, about 1.35 m
-away in +x, facing the robot (so the human's right hand is at +y). The human's right wrist rests on
-the table edge near HUMAN_REST = (1.22, 0.24, 0.08) between interactions. Mocap "world" coincides
-with the robot base frame here, so the bags' wrist frame 'world' needs no transform.
+Scene (the world frame of robot/scene.py, metres): the table top is z = 0; the default robot, the
+KUKA iiwa 14, stands at the origin facing +x, and any other arm stands where its description's
+mount puts its base. The human stands across the table, about 1.35 m away in +x, facing the robot
+(so the human's right hand is at +y). The human's right wrist rests on the table edge near
+HUMAN_REST = (1.22, 0.24, 0.08) between interactions. The human side (wrist streams) is given in
+this world frame, the mocap frame 'world' of the bags; the robot side (joints, flange targets) in
+the robot's base frame, which for the iiwa is the world frame itself.
+
+The robot is configuration (robot/description.py): every robot-specific number (seed postures,
+tool orientation, clearance frames and link radius, limits) comes from the description or the
+model. The human side is drawn before and independently of the robot, from a random stream per
+demonstration and attempt, so two arms given the same seed get the same human movements, except
+where an arm cannot follow one (too fast for its joint speeds, out of reach): that attempt is
+redrawn for that arm only. In the pole scenario a movement an arm cannot follow in the drawn time
+is slowed to 1.03 times its fastest instead (so its human duration differs).
 
 - Box assembly (thesis 3.4.2), 48 unlabeled demonstrations, labels kept for evaluation only:
     plate (15):       the human extends the hand forward to receive a plate anywhere in a
@@ -35,7 +45,7 @@ with the robot base frame here, so the bags' wrist frame 'world' needs no transf
 
 Human reaches are minimum-jerk with shape and speed variability (``data.human``); mocap adds white
 noise; an optional occlusion removes 0.1-0.3 s of wrist samples. Robot motions are joint-space
-minimum-jerk-like (quintic) paths through IK waypoints (``robot.kinematics.IiwaKinematics``, warm
+minimum-jerk-like (quintic) paths through IK waypoints (``robot.kinematics.RobotKinematics``, warm
 started from a per-pattern nominal posture so postures are consistent within a pattern), spanning
 exactly the human's movement (onset..end), within joint position and velocity limits. Both streams
 are sampled at 100 Hz with 0.3-0.5 s of stillness before the onset and 0.4-0.6 s after the end.
@@ -53,6 +63,7 @@ import numpy as np
 from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.scenarios import human_motion as human
 from mixture_ip_ros.io.dataset import resample_wrist
+from mixture_ip_ros.robot.description import DEFAULT_ROBOT, RobotDescription, load_description
 
 LABEL_FILE = 'labels.json'
 HUMAN_REST = np.array([1.22, 0.24, 0.08])
@@ -66,8 +77,9 @@ REST_BEFORE = (0.3, 0.5)     # s of stillness before the onset
 REST_AFTER = (0.4, 0.6)      # s after the end (the end detector needs ~0.3 s of rest)
 JOINT_CLOCK_OFFSET = 0.004   # s, joint_states are not sampled in phase with the mocap
 
-# Flange orientations with joint 7 near zero: pointing down, and pointing horizontally at the
-# human (+x); both get turned by the yaw toward the target.
+# Tool orientations in the robot's base frame (the tool frame's z axis is the approach direction;
+# a description's tool_rpy maps it onto its flange frame): pointing down, and pointing
+# horizontally at the human (+x); both get turned by the yaw toward the target.
 R_DOWN = np.array([[-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]])
 R_FORWARD = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
 
@@ -78,14 +90,18 @@ SCREWDRIVER_GOAL = ((0.82, 0.95), (-0.30, 0.05), (0.50, 0.66))
 PLATE_OFFSET = np.array([-0.12, 0.0, 0.04])                  # flange end - wrist end
 SCREWDRIVER_OFFSET = np.array([-0.09, 0.0, -0.03])
 SCREW_HANDOVER = np.array([0.70, -0.12, 0.30])
-SCREWDRIVER_HOLD = np.array([0.60, 0.0, 0.45])   # robot holds the screwdriver here at the onset
+# The robot holds the screwdriver here at the onset, pointing at the human, at the middle height of
+# the handover region (flange 47-63 cm): lower, a Panda's wrist (joint 6 <= 215 deg) could not
+# point it horizontally this close to its base.
+SCREWDRIVER_HOLD = np.array([0.60, 0.0, 0.55])
 SCREW_HANDOVER_NOISE = 0.008
 LIFT = 0.12                  # m the robot lifts an object off its stand
 LIFT_FRACTION = 0.15        # of the movement spent lifting (the deterministic part)
 # Handing over an object from a stand 70 deg to the side takes the iiwa (85 deg/s on joint 1) ~2 s.
 BOX_DURATION = {'plate': (2.0, 3.4), 'screw': (1.7, 2.8), 'screwdriver': (1.2, 2.1)}
 BOX_COUNTS = {'plate': 15, 'screw': 20, 'screwdriver': 13}
-Q_HOME = np.array([0.0, 0.35, 0.0, -1.55, 0.0, 1.2, 0.0])
+MAX_ATTEMPTS = 50            # per demonstration (box) or spot (pole) before giving up
+TABLE_CLEARANCE = 0.01       # m the arm (past its shoulder) keeps above the table top (z = 0)
 
 # Pole geometry.
 WAND_OFFSET = np.array([0.22, 0.0, 0.14])     # wrist end - pointed spot
@@ -98,10 +114,10 @@ POLE_POINT_TILT = (0.25, 0.6)  # pointing axis (x, side) components per unit dow
 # 2.4-3.5 s depending on the spot: durations are drawn (stratified) from this range but never
 # below 1.03 times the shortest feasible one.
 POLE_DURATION = (2.6, 4.6)
-LINK_RADIUS = 0.065          # iiwa links as capsules around the joint-to-joint segments
 POLE_MARGIN = 0.015
 POLE_VIA_FRACTION = 0.4
-Q_POLE_HOME = np.array([0.0, -0.35, 0.0, -1.95, 0.0, 0.75, 0.0])
+APPROACH = 0.1               # m back along the pointing axis: the posture above the spot ...
+APPROACH_FRACTION = 0.9      # ... passed at this fraction of the movement, when one is needed
 
 BOX_LABELS = ('plate', 'screw', 'screwdriver')
 POLE_LABELS = ('left', 'right')
@@ -111,8 +127,10 @@ POLE_LABELS = ('left', 'right')
 class GeneratedDemo:
     """One generated demonstration as recorded (before segmentation), with its ground truth.
 
-    Times are seconds since the recording start. ``wrist_xyz`` is in the robot base frame, NaN
-    rows are occluded (not written to a bag). ``onset``/``end`` are the true movement interval.
+    Times are seconds since the recording start. ``wrist_xyz`` and ``wrist_goal`` are in the
+    scene's world frame (the mocap frame), NaN rows are occluded (not written to a bag);
+    ``joint_*`` and ``flange_goal`` are the robot's (``robot``), in its base frame.
+    ``onset``/``end`` are the true movement interval.
     """
 
     name: str
@@ -126,6 +144,7 @@ class GeneratedDemo:
     end: float
     wrist_goal: np.ndarray
     flange_goal: np.ndarray
+    robot: RobotDescription = field(default_factory=load_description)
     extra: dict = field(default_factory=dict)
 
     @property
@@ -133,12 +152,14 @@ class GeneratedDemo:
         return self.end - self.onset
 
     def to_demonstration(self, dt: float = 0.01, gap_tolerance: float = 1.25) -> Demonstration:
-        """The Demonstration with the *true* onset/end (no detector), resampled like a loaded bag."""
+        """The Demonstration with the *true* onset/end (no detector), resampled like a loaded bag
+        (the wrist moved into the robot's base frame)."""
         n = int(np.floor(self.duration / dt + 1e-9)) + 1
         rel = dt * np.arange(n)
         grid = self.onset + rel
         period = max(dt, float(np.median(np.diff(self.wrist_t))))
-        observed = resample_wrist(self.wrist_t, self.wrist_xyz, grid, gap_tolerance * period)
+        observed = resample_wrist(self.wrist_t, self.robot.world_to_base().apply_array(
+            self.wrist_xyz), grid, gap_tolerance * period)
         controlled = np.column_stack([np.interp(grid, self.joint_t, self.joint_q[:, j])
                                       for j in range(self.joint_q.shape[1])])
         return Demonstration(t=rel, observed=observed, controlled=controlled, label=self.label,
@@ -198,26 +219,104 @@ def _yaw_rotation(yaw: float, R: np.ndarray) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ R
 
 
-def _toward(position) -> np.ndarray:
-    """Flange pointing horizontally from the robot's axis toward ``position``."""
-    return _yaw_rotation(float(np.arctan2(position[1], position[0])), R_FORWARD)
+def _yaw(position) -> float:
+    """Direction of ``position`` (base frame) seen from the robot's vertical axis."""
+    return float(np.arctan2(position[1], position[0]))
 
 
-def _kinematics(kinematics):
-    if kinematics is not None:
-        return kinematics
-    from mixture_ip_ros.robot.kinematics import IiwaKinematics
-    return IiwaKinematics()
+class _Arm:
+    """The robot side of the scenarios: its kinematics and description, and the map from the
+    scene's world frame (the human, the stands, the pole) to its base frame (its targets).
+
+    Rotations it returns are flange orientations in the base frame: a tool orientation times the
+    description's tool rotation.
+    """
+
+    def __init__(self, kinematics=None):
+        if kinematics is None:
+            from mixture_ip_ros.robot.kinematics import RobotKinematics
+            kinematics = RobotKinematics()
+        self.kin = kinematics
+        self.description = d = kinematics.description
+        self._to_base = d.world_to_base()
+        self._to_world = d.base_to_world()
+        self._tool = d.tool_rotation()
+        self.box_seed = np.array(d.box_seed if d.box_seed is not None else d.home, dtype=float)
+        self.pole_home = np.array(d.pole_home if d.pole_home is not None else d.home,
+                                  dtype=float)
+        if not d.clearance_frames:
+            self.clearance_frames = [d.flange_frame]
+        else:
+            self.clearance_frames = list(d.clearance_frames)
+
+    def base(self, p_world) -> np.ndarray:
+        return self._to_base.apply_array(np.asarray(p_world, dtype=float))
+
+    @property
+    def tool_axis(self) -> np.ndarray:
+        """The tool's approach axis in the flange frame."""
+        return self._tool.T[:, 2]
+
+    def flange(self, R_tool_base) -> np.ndarray:
+        """Flange orientation (base frame) for a tool orientation given in the base frame."""
+        return R_tool_base @ self._tool
+
+    def flange_from_world(self, R_tool_world) -> np.ndarray:
+        """Flange orientation (base frame) for a tool orientation given in the world frame."""
+        return self._to_base.rotation @ R_tool_world @ self._tool
+
+    def down(self, p_base) -> np.ndarray:
+        """Tool pointing down, turned with the robot's axis toward ``p_base`` (no wrist roll)."""
+        return self.flange(_yaw_rotation(_yaw(p_base), R_DOWN))
+
+    def toward(self, p_base) -> np.ndarray:
+        """Tool pointing horizontally from the robot's axis toward ``p_base``."""
+        return self.flange(_yaw_rotation(_yaw(p_base), R_FORWARD))
+
+    def seed(self, p_base) -> np.ndarray:
+        """The box seed posture turned toward ``p_base`` by the first (vertical) joint."""
+        return np.r_[self.box_seed[0] + _yaw(p_base), self.box_seed[1:]]
+
+    def link_points(self, q) -> np.ndarray:
+        """The clearance frames' origins at q, (m, 3), world frame."""
+        return self._to_world.apply_array(self.kin.frame_positions(q, self.clearance_frames))
+
+    def feasible(self, q, qd) -> bool:
+        """A joint path (samples, dof) within the position and velocity limits, with the arm
+        (its clearance polyline after the first point, every 5th sample) above the table."""
+        kin = self.kin
+        if not (check_velocity_limits(kin, qd) and np.all(q >= kin.lower)
+                and np.all(q <= kin.upper)):
+            return False
+        lowest = min(self.link_points(x)[1:, 2].min(initial=np.inf) for x in q[::5])
+        return bool(lowest > TABLE_CLEARANCE)
 
 
 ROTATION_TOL = 0.2  # rad; a handover or pointing only needs the gripper roughly facing its target
+# rad demonstrated postures keep from every joint limit: a prediction around them then stays
+# inside the limits (MuJoCo stops a joint at its limit; the controller's model does not know it).
+LIMIT_MARGIN = 0.1
 
 
 def _ik(kin, position, q0, rotation, tol=2e-3):
+    """IK of the flange to ``position`` (base frame) with the soft flange ``rotation``."""
     # Tight position, soft orientation (within ROTATION_TOL), no random restarts: a restart could
     # land in another arm configuration and break the consistency of a pattern's postures.
     return kin.ik(np.asarray(position, dtype=float), q0, rotation=rotation, tol=tol,
-                  orientation_weight=0.3, rotation_tol=ROTATION_TOL, restarts=0)
+                  orientation_weight=0.3, rotation_tol=ROTATION_TOL, restarts=0,
+                  limit_margin=LIMIT_MARGIN)
+
+
+def _ik_turning(kin, position, q0, R_from, R_to, steps: int = 6):
+    """IK at ``position`` with the flange orientation turned from R_from to R_to in ``steps``
+    (each solve warm-started at the last): a local solver then follows one arm configuration
+    from the seed's to a pose far from it (pointing forward instead of down)."""
+    from scipy.spatial.transform import Rotation, Slerp
+    turn = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([R_from, R_to])))
+    q = q0
+    for s in np.linspace(0.0, 1.0, steps + 1):
+        q = _ik(kin, position, q, turn([s]).as_matrix()[0])
+    return q
 
 
 def _uniform_box(rng, box) -> np.ndarray:
@@ -247,16 +346,6 @@ def check_velocity_limits(kin, qd, slack: float = 1.0) -> bool:
 
 # --------------------------------------------------------------------------------- box assembly
 
-def _down(position) -> np.ndarray:
-    """Flange pointing down, turned with the robot's axis toward ``position`` (no wrist roll)."""
-    return _yaw_rotation(float(np.arctan2(position[1], position[0])), R_DOWN)
-
-
-def _seed(position) -> np.ndarray:
-    """The home posture turned toward ``position``: elbow up, wrist in front."""
-    return np.r_[np.arctan2(position[1], position[0]), Q_HOME[1:]]
-
-
 class _BoxPostures:
     """Nominal postures per pattern, solved once so every demonstration warm-starts the same way.
 
@@ -264,30 +353,43 @@ class _BoxPostures:
     handed over from above); the screwdriver is held gripper-forward, pointing at the human.
     """
 
-    def __init__(self, kin):
+    def __init__(self, arm: _Arm):
         from mixture_ip_ros.robot.scene import plate_position, screw_position
-        self.plate_grasp_pos = plate_position() + np.array([0.0, 0.0, 0.03])
-        self.screw_grasp_pos = screw_position() + np.array([0.0, 0.0, 0.03])
+        kin = arm.kin
+        lift = np.array([0.0, 0.0, LIFT])
+        self.plate_grasp_pos = arm.base(plate_position() + np.array([0.0, 0.0, 0.03]))
+        self.screw_grasp_pos = arm.base(screw_position() + np.array([0.0, 0.0, 0.03]))
         p, s = self.plate_grasp_pos, self.screw_grasp_pos
-        self.plate_grasp = _ik(kin, p, _seed(p), _down(p))
-        self.plate_lift = _ik(kin, p + [0, 0, LIFT], self.plate_grasp, _down(p))
-        self.screw_grasp = _ik(kin, s, _seed(s), _down(s))
-        self.screw_lift = _ik(kin, s + [0, 0, LIFT], self.screw_grasp, _down(s))
+        up = arm.base(lift) - arm.base(np.zeros(3))
+        self.plate_grasp = _ik(kin, p, arm.seed(p), arm.down(p))
+        self.plate_lift = _ik(kin, p + up, self.plate_grasp, arm.down(p))
+        self.screw_grasp = _ik(kin, s, arm.seed(s), arm.down(s))
+        self.screw_lift = _ik(kin, s + up, self.screw_grasp, arm.down(s))
         centre = lambda box: np.array([(lo + hi) / 2 for lo, hi in box])  # noqa: E731
-        plate_c = centre(PLATE_GOAL) + PLATE_OFFSET
-        self.plate_hand = _ik(kin, plate_c, _seed(plate_c), _down(plate_c))
-        self.screw_hand = _ik(kin, SCREW_HANDOVER, _seed(SCREW_HANDOVER), _down(SCREW_HANDOVER))
-        self.screwdriver_start = _ik(kin, SCREWDRIVER_HOLD, Q_HOME, _toward(SCREWDRIVER_HOLD))
-        sd_c = centre(SCREWDRIVER_GOAL) + SCREWDRIVER_OFFSET
-        self.screwdriver_hand = _ik(kin, sd_c, self.screwdriver_start, _toward(sd_c))
+        plate_c = arm.base(centre(PLATE_GOAL) + PLATE_OFFSET)
+        self.plate_hand = _ik(kin, plate_c, arm.seed(plate_c), arm.down(plate_c))
+        screw = arm.base(SCREW_HANDOVER)
+        self.screw_hand = _ik(kin, screw, arm.seed(screw), arm.down(screw))
+        hold = arm.base(SCREWDRIVER_HOLD)
+        self.screwdriver_start = _ik_turning(kin, hold, arm.seed(hold), arm.down(hold),
+                                             arm.toward(hold))
+        sd_c = arm.base(centre(SCREWDRIVER_GOAL) + SCREWDRIVER_OFFSET)
+        self.screwdriver_hand = _ik(kin, sd_c, self.screwdriver_start, arm.toward(sd_c))
 
 
-def _box_demo(kin, postures, rng, label, name, occlusion, noise, stratum):
-    """One demonstration; ``stratum`` = (k, n): its duration is drawn from the k-th of n equal
-    slices of the pattern's range, so every pattern spans its whole range of speeds."""
+def _box_demo(arm, postures, seed, index, label, occlusion, noise, stratum):
+    """Demonstration ``index``; ``stratum`` = (k, n): its duration is drawn from the k-th of n
+    equal slices of the pattern's range, so every pattern spans its whole range of speeds.
+
+    Attempt a draws the human's movement from the stream (seed, index, a) and the robot's
+    teaching noise from (seed, index, a, 1), so the human side does not depend on the robot.
+    """
+    kin = arm.kin
     lo, hi = BOX_DURATION[label]
     k, n = stratum
-    for attempt in range(50):
+    for attempt in range(MAX_ATTEMPTS):
+        rng = np.random.default_rng([seed, index, attempt])
+        teacher = np.random.default_rng([seed, index, attempt, 1])
         # A target the robot cannot reach in time within its velocity limits is redrawn; after
         # every 5 failures the movement gets 5 % slower (as a teacher would slow down).
         u = (k + rng.uniform(0.25, 0.75)) / n
@@ -301,7 +403,7 @@ def _box_demo(kin, postures, rng, label, name, occlusion, noise, stratum):
             first = [postures.plate_grasp, postures.plate_lift]
         elif label == 'screw':
             goal = _uniform_box(rng, SCREWDRIVER_FETCH)
-            flange = SCREW_HANDOVER + rng.normal(0.0, SCREW_HANDOVER_NOISE, 3)
+            flange = SCREW_HANDOVER + teacher.normal(0.0, SCREW_HANDOVER_NOISE, 3)
             warm = postures.screw_hand
             first = [postures.screw_grasp, postures.screw_lift]
         else:
@@ -309,8 +411,14 @@ def _box_demo(kin, postures, rng, label, name, occlusion, noise, stratum):
             flange = goal + SCREWDRIVER_OFFSET
             warm = postures.screwdriver_hand
             first = [postures.screwdriver_start]
+        via_scale = {'plate': (0.03, 0.04, 0.05), 'screw': (0.03, 0.03, 0.05),
+                     'screwdriver': (0.04, 0.04, 0.04)}[label]
+        xyz, via, skew = _human_wrist(rng, wrist_t, onset, duration, start, goal,
+                                      np.asarray(via_scale), occlusion, noise)
+        flange = arm.base(flange)
         try:
-            q_end = _ik(kin, flange, warm, _toward(flange) if label == 'screwdriver' else _down(flange))
+            q_end = _ik(kin, flange, warm,
+                        arm.toward(flange) if label == 'screwdriver' else arm.down(flange))
         except ValueError:
             continue
         if len(first) == 2:
@@ -319,17 +427,16 @@ def _box_demo(kin, postures, rng, label, name, occlusion, noise, stratum):
         else:
             times, stops = [onset, end], [True, True]
         q, qd = quintic_path(joint_t, times, np.vstack(first + [q_end]), stops)
-        if not (check_velocity_limits(kin, qd) and np.all(q >= kin.lower) and np.all(q <= kin.upper)):
+        if not arm.feasible(q, qd):
             continue
-        via_scale = {'plate': (0.03, 0.04, 0.05), 'screw': (0.03, 0.03, 0.05),
-                     'screwdriver': (0.04, 0.04, 0.04)}[label]
-        xyz, via, skew = _human_wrist(rng, wrist_t, onset, duration, start, goal,
-                                      np.asarray(via_scale), occlusion, noise)
-        return GeneratedDemo(name=name, label=label, wrist_t=wrist_t, wrist_xyz=xyz,
-                             joint_t=joint_t, joint_q=q, joint_qd=qd, onset=onset, end=end,
-                             wrist_goal=goal, flange_goal=flange,
-                             extra={'via': via, 'skew': skew, 'wrist_start': start})
-    raise RuntimeError(f'could not generate a feasible {label} demonstration in 50 tries')
+        return GeneratedDemo(name=f'demo_{index:03d}', label=label, wrist_t=wrist_t,
+                             wrist_xyz=xyz, joint_t=joint_t, joint_q=q, joint_qd=qd, onset=onset,
+                             end=end, wrist_goal=goal, flange_goal=flange, robot=arm.description,
+                             extra={'via': via, 'skew': skew, 'wrist_start': start,
+                                    'attempt': attempt})
+    raise RuntimeError(f'{arm.description.name}: could not generate a feasible {label} '
+                       f'demonstration in {MAX_ATTEMPTS} tries (is the task within its reach? '
+                       'see its mount)')
 
 
 def box_assembly(seed: int = 0, *, occlusion: float = 0.0, noise: float = MOCAP_NOISE,
@@ -338,27 +445,32 @@ def box_assembly(seed: int = 0, *, occlusion: float = 0.0, noise: float = MOCAP_
 
     ``occlusion`` is the probability that a demonstration has one 0.1-0.3 s wrist gap. Names are
     demo_000.. in that shuffled order, so a folder listing does not reveal the pattern.
+    ``kinematics``: the robot's RobotKinematics (None: the default iiwa 14).
     """
     counts = dict(BOX_COUNTS if counts is None else counts)
     unknown = set(counts) - set(BOX_LABELS)
     if unknown:
         raise ValueError(f'unknown box-assembly patterns {sorted(unknown)}; known: {BOX_LABELS}')
-    kin = _kinematics(kinematics)
-    postures = _BoxPostures(kin)
+    arm = _Arm(kinematics)
+    try:
+        postures = _BoxPostures(arm)
+    except ValueError as exc:
+        raise ValueError(f'{arm.description.name} cannot reach the box-assembly postures from '
+                         f'its mount and box_seed: {exc}') from exc
     rng = np.random.default_rng(seed)
     jobs = []
     for label in BOX_LABELS:
         n = int(counts.get(label, 0))
         jobs += [(label, (int(k), n)) for k in rng.permutation(n)]
     jobs = [jobs[i] for i in rng.permutation(len(jobs))]
-    return [_box_demo(kin, postures, rng, label, f'demo_{i:03d}', occlusion, noise, stratum)
+    return [_box_demo(arm, postures, seed, i, label, occlusion, noise, stratum)
             for i, (label, stratum) in enumerate(jobs)]
 
 
 # --------------------------------------------------------------------------------- pole
 
 def pole_geometry():
-    """(pole xy (2,), radius, height) of robot/scene.py's pole, metres in the base frame."""
+    """(pole xy (2,), radius, height) of robot/scene.py's pole, metres in the world frame."""
     from mixture_ip_ros.robot.scene import POLE_HEIGHT, POLE_RADIUS, POLE_XY
     return np.asarray(POLE_XY, dtype=float), float(POLE_RADIUS), float(POLE_HEIGHT)
 
@@ -367,16 +479,14 @@ _pole_geometry = pole_geometry  # older name, used by evaluation.py
 
 
 def link_points(kin, q) -> np.ndarray:
-    """Joint origins 2, 4, 6 (shoulder, elbow, wrist) and the flange, (4, 3), base frame."""
-    import pinocchio as pin
-    pin.forwardKinematics(kin.model, kin.data, np.asarray(q, dtype=float))
-    pin.updateFramePlacement(kin.model, kin.data, kin.flange_id)
-    return np.array([kin.data.oMi[2].translation, kin.data.oMi[4].translation,
-                     kin.data.oMi[6].translation, kin.data.oMf[kin.flange_id].translation])
+    """The arm as a polyline at q: the origins of the description's clearance frames (e.g.
+    shoulder, elbow, wrist, flange), (m, 3), in the world frame (where the pole stands)."""
+    return _Arm(kin).link_points(q)
 
 
 def pole_clearance(points: np.ndarray, pole_xy=None, pole_height=None, samples: int = 12) -> float:
-    """Smallest distance between the pole's axis segment and the polyline through ``points``."""
+    """Smallest distance between the pole's axis segment and the polyline through ``points``
+    (world frame)."""
     if pole_xy is None or pole_height is None:
         xy, _, height = pole_geometry()
         pole_xy = xy if pole_xy is None else np.asarray(pole_xy, dtype=float)
@@ -389,18 +499,19 @@ def pole_clearance(points: np.ndarray, pole_xy=None, pole_height=None, samples: 
     return float(np.min(np.hypot(dxy, dz)))
 
 
-def pole_clearance_required() -> float:
+def pole_clearance_required(link_radius: float) -> float:
     """Distance every link segment keeps from the pole's axis: pole + link radius + margin."""
     _, pole_radius, _ = pole_geometry()
-    return pole_radius + LINK_RADIUS + POLE_MARGIN
+    return pole_radius + link_radius + POLE_MARGIN
 
 
-def _path_clearance(kin, Q) -> float:
-    return min(pole_clearance(link_points(kin, q)) for q in Q)
+def _path_clearance(arm, Q) -> float:
+    return min(pole_clearance(arm.link_points(q)) for q in Q)
 
 
 def _pointing_rotation(side: int) -> np.ndarray:
-    """Flange axis pointing down at the spot, tilted to come from the robot's side ``side``.
+    """Tool axis pointing down at the spot, tilted to come from the robot's side ``side`` (world
+    frame).
 
     Tilting moves the wrist out to that side of the pole, where the arm passes.
     """
@@ -411,28 +522,31 @@ def _pointing_rotation(side: int) -> np.ndarray:
     return np.column_stack([x, np.cross(z, x), z])
 
 
-def _clear_the_pole(kin, q, required: float, steps: int = 60, step: float = 0.04):
-    """Move the elbow around the shoulder-wrist line (the arm's null space: the flange pose stays)
-    until every link is ``required`` metres from the pole axis, or no further gain is possible."""
+def _clear_the_pole(arm, q, required: float, steps: int = 60, step: float = 0.04):
+    """Move the arm in the null space of its flange pose (the elbow around the shoulder-wrist line
+    of a 7-joint arm; nothing moves for an arm without spare joints) until every link is
+    ``required`` metres from the pole axis, or no further gain is possible."""
+    kin = arm.kin
     q = np.array(q, dtype=float)
     lo, hi = kin.lower + 0.03, kin.upper - 0.03
+    n = kin.dof
     for _ in range(steps):
-        c = pole_clearance(link_points(kin, q))
+        c = pole_clearance(arm.link_points(q))
         if c >= required:
             break
-        grad = np.zeros(7)
-        for j in range(7):
-            dq = np.zeros(7)
+        grad = np.zeros(n)
+        for j in range(n):
+            dq = np.zeros(n)
             dq[j] = 1e-4
-            grad[j] = (pole_clearance(link_points(kin, q + dq)) - c) / 1e-4
+            grad[j] = (pole_clearance(arm.link_points(q + dq)) - c) / 1e-4
         J = kin.jacobian(q)
-        N = np.eye(7) - np.linalg.pinv(J) @ J
+        N = np.eye(n) - np.linalg.pinv(J) @ J
         d = N @ grad
         norm = np.linalg.norm(d)
         if norm < 1e-9:
             break
         q_new = np.clip(q + step * d / norm, lo, hi)
-        if pole_clearance(link_points(kin, q_new)) <= c:
+        if pole_clearance(arm.link_points(q_new)) <= c:
             break
         q = q_new
     return q
@@ -442,94 +556,126 @@ class _PolePostures:
     """Per side: the via posture beside the pole and a nominal pointing posture (at a spot just
     beyond the pole), both with the elbow swung out; every demonstration warm-starts from them."""
 
-    def __init__(self, kin, clearance):
+    def __init__(self, arm, clearance):
+        kin = arm.kin
         pole_xy, _, _ = pole_geometry()
         self.via, self.nominal = {}, {}
         for side in (1, -1):
-            R = _pointing_rotation(side)
-            seed = Q_POLE_HOME.copy()
-            seed[0] = side * 0.7
-            via_pos = np.array([pole_xy[0] - 0.08, pole_xy[1] + side * 0.30, 0.40])
+            R_world = _pointing_rotation(side)
+            R = arm.flange_from_world(R_world)
+            seed = arm.pole_home.copy()
+            seed[0] += side * 0.7
+            via_pos = arm.base([pole_xy[0] - 0.08, pole_xy[1] + side * 0.30, 0.40])
             q = _ik(kin, via_pos, seed, R)
-            q = _ik(kin, via_pos, _clear_the_pole(kin, q, 2 * clearance), R)
+            q = _ik(kin, via_pos, _clear_the_pole(arm, q, 2 * clearance), R)
             spot = np.array([pole_xy[0] + 0.22, pole_xy[1] + side * 0.05, 0.0])
-            flange = spot - FLANGE_FROM_SPOT * R[:, 2]
+            flange = arm.base(spot - FLANGE_FROM_SPOT * R_world[:, 2])
             n = _ik(kin, flange, q, R)
-            n = _ik(kin, flange, _clear_the_pole(kin, n, 2 * clearance, steps=100), R)
+            n = _ik(kin, flange, _clear_the_pole(arm, n, 2 * clearance, steps=100), R)
             self.via[side], self.nominal[side] = q, n
 
 
-def _pole_demo(kin, postures, rng, side, spot, name, occlusion, noise, clearance, stratum):
-    R = _pointing_rotation(side)
-    flange = spot - FLANGE_FROM_SPOT * R[:, 2]
+def _pole_demo(arm, postures, rng, side, spot, name, occlusion, noise, clearance, stratum):
+    """One demonstration pointing at ``spot`` (world frame) from ``side``, or None if the robot
+    cannot do it; the human's movement comes from ``rng`` only."""
+    kin = arm.kin
+    k, n = stratum
+    lo, hi = POLE_DURATION
+    drawn = lo + (hi - lo) * (k + rng.uniform(0.25, 0.75)) / n
+    start = HUMAN_REST + rng.normal(0.0, REST_JITTER, 3)
+    goal = spot + WAND_OFFSET + rng.normal(0.0, 0.01, 3)
+    R_world = _pointing_rotation(side)
+    R = arm.flange_from_world(R_world)
+    flange = arm.base(spot - FLANGE_FROM_SPOT * R_world[:, 2])
     q_via = postures.via[side]
     try:
         q_end = _ik(kin, flange, postures.nominal[side], R)
-        if pole_clearance(link_points(kin, q_end)) < clearance + 0.02:
-            q_end = _ik(kin, flange, _clear_the_pole(kin, q_end, clearance + 0.03, steps=100), R)
+        if pole_clearance(arm.link_points(q_end)) < clearance + 0.02:
+            q_end = _ik(kin, flange, _clear_the_pole(arm, q_end, clearance + 0.03, steps=100), R)
     except ValueError:
         return None
-    knots = np.vstack([Q_POLE_HOME, q_via, q_end])
+    knots = [arm.pole_home, q_via, q_end]
+    fractions = [0.0, POLE_VIA_FRACTION, 1.0]
+    unit = np.linspace(0.0, 1.0, 400)
+    q_unit, qd_unit = quintic_path(unit, fractions, knots)
+    if min(arm.link_points(x)[1:, 2].min(initial=np.inf) for x in q_unit[::10]) <= TABLE_CLEARANCE:
+        # The joint-space path from the via posture swings the hand through the table (it does
+        # for the Panda's long hand): come down to the spot from a posture above it instead.
+        try:
+            q_above = _ik(kin, flange - APPROACH * (R @ arm.tool_axis), q_end, R)
+        except ValueError:
+            return None
+        knots.insert(2, q_above)
+        fractions.insert(2, APPROACH_FRACTION)
+        q_unit, qd_unit = quintic_path(unit, fractions, knots)
     # The fastest the arm can follow this path: joint speeds scale with 1 / duration.
-    _, qd_unit = quintic_path(np.linspace(0.0, 1.0, 400), [0.0, POLE_VIA_FRACTION, 1.0], knots)
     fastest = float(np.max(np.abs(qd_unit) / kin.velocity_limit))
-    k, n = stratum
-    lo, hi = POLE_DURATION
-    duration = max(lo + (hi - lo) * (k + rng.uniform(0.25, 0.75)) / n, 1.03 * fastest)
+    duration = max(drawn, 1.03 * fastest)
     onset, end, wrist_t, joint_t = _recording_times(rng, duration)
-    times = [onset, onset + POLE_VIA_FRACTION * duration, end]
-    q, qd = quintic_path(joint_t, times, knots)
-    if np.any(q < kin.lower) or np.any(q > kin.upper) or not check_velocity_limits(kin, qd):
+    q, qd = quintic_path(joint_t, [onset + f * duration for f in fractions], knots)
+    if not arm.feasible(q, qd) or _path_clearance(arm, q) < clearance:
         return None
-    if _path_clearance(kin, q) < clearance:
-        return None
-    start = HUMAN_REST + rng.normal(0.0, REST_JITTER, 3)
-    goal = spot + WAND_OFFSET + rng.normal(0.0, 0.01, 3)
     xyz, via, skew = _human_wrist(rng, wrist_t, onset, duration, start, goal,
                                   np.array([0.03, 0.03, 0.05]), occlusion, noise)
     return GeneratedDemo(name=name, label='left' if side > 0 else 'right', wrist_t=wrist_t,
                          wrist_xyz=xyz, joint_t=joint_t, joint_q=q, joint_qd=qd, onset=onset,
-                         end=end, wrist_goal=goal, flange_goal=flange,
-                         extra={'spot': spot, 'via': via, 'skew': skew, 'wrist_start': start})
+                         end=end, wrist_goal=goal, flange_goal=flange, robot=arm.description,
+                         extra={'spot': spot, 'via': via, 'skew': skew, 'wrist_start': start,
+                                'drawn_duration': drawn})
 
 
 def pole(seed: int = 0, *, n: int = 28, both_sides: int = 6, occlusion: float = 0.0,
          noise: float = MOCAP_NOISE, kinematics=None) -> list:
     """The pole-pointing demonstrations (thesis 3.4.1), ``n`` in all, in a seeded random order.
 
-    ``both_sides`` spots near the middle are demonstrated once on each side; every other spot once,
-    on a side from which it is reachable (spots with |y| > POLE_BOTH_SIDES_Y only on their own side).
+    ``both_sides`` spots near the middle are demonstrated once on each side (first), then every
+    other spot once, on a side from which it is reachable (spots with |y| > POLE_BOTH_SIDES_Y only
+    on their own side). Spot s, attempt a is drawn from the stream (seed, s, a), so the human side
+    does not depend on the robot (``kinematics``; None: the iiwa 14).
     """
     if n < 2 * both_sides:
         raise ValueError(f'n ({n}) must be at least 2 * both_sides ({2 * both_sides})')
-    kin = _kinematics(kinematics)
-    clearance = pole_clearance_required()
-    postures = _PolePostures(kin, clearance)
+    arm = _Arm(kinematics)
+    clearance = pole_clearance_required(arm.description.link_radius)
+    try:
+        postures = _PolePostures(arm, clearance)
+    except ValueError as exc:
+        raise ValueError(f'{arm.description.name} cannot reach the pole postures from its mount '
+                         f'and pole_home: {exc}') from exc
     rng = np.random.default_rng(seed)
     strata = rng.permutation(n)
     demos = []
-    pairs_left = both_sides
-    tries = 0
+    slot = 0
     while len(demos) < n:
-        tries += 1
-        if tries > 40 * n:
-            raise RuntimeError(f'could not generate {n} collision-free pole demonstrations')
-        pair = pairs_left > 0 and len(demos) + 2 <= n
-        y_range = (-POLE_BOTH_SIDES_Y, POLE_BOTH_SIDES_Y) if pair else POLE_TARGET_Y
-        spot = np.array([rng.uniform(*POLE_TARGET_X), rng.uniform(*y_range), 0.0])
-        if pair:
-            sides = [1, -1]
-        elif abs(spot[1]) > POLE_BOTH_SIDES_Y:
-            sides = [1 if spot[1] > 0 else -1]
+        pair = slot < both_sides
+        for attempt in range(MAX_ATTEMPTS):
+            human = np.random.default_rng([seed, slot, attempt])
+            y_range = (-POLE_BOTH_SIDES_Y, POLE_BOTH_SIDES_Y) if pair else POLE_TARGET_Y
+            spot = np.array([human.uniform(*POLE_TARGET_X), human.uniform(*y_range), 0.0])
+            if pair:
+                sides = [1, -1]
+            elif abs(spot[1]) > POLE_BOTH_SIDES_Y:
+                sides = [1 if spot[1] > 0 else -1]
+            else:
+                sides = [1 if human.uniform() < 0.5 else -1]
+            made = []
+            for i, s in enumerate(sides):
+                made.append(_pole_demo(arm, postures, human, s, spot, '', occlusion, noise,
+                                       clearance, (int(strata[len(demos) + i]), n)))
+                if made[-1] is None:
+                    break
+            if all(d is not None for d in made):
+                break
         else:
-            sides = [1 if rng.uniform() < 0.5 else -1]
-        made = [_pole_demo(kin, postures, rng, s, spot, '', occlusion, noise, clearance,
-                           (int(strata[len(demos) + i]), n)) for i, s in enumerate(sides)]
-        if any(d is None for d in made):
-            continue
-        if pair:
-            pairs_left -= 1
+            raise RuntimeError(
+                f'{arm.description.name}: could not generate a collision-free pole demonstration '
+                f'{"pair " if pair else ""}in {MAX_ATTEMPTS} tries'
+                + (' (an arm without a spare joint may not pass the pole on both sides of the '
+                   'same spot: try both_sides=0)' if pair and arm.kin.dof < 7 else ''))
+        for d in made:
+            d.extra['attempt'] = attempt
         demos.extend(made)
+        slot += 1
     order = rng.permutation(len(demos))
     demos = [demos[i] for i in order]
     for i, d in enumerate(demos):
@@ -540,37 +686,60 @@ def pole(seed: int = 0, *, n: int = 28, both_sides: int = 6, occlusion: float = 
 SCENARIOS = {'box_assembly': box_assembly, 'pole': pole}
 
 
-def generate(scenario: str, seed: int = 0, **kwargs) -> list:
-    """Demonstrations of a named scenario ('box_assembly' or 'pole')."""
+def generate(scenario: str, seed: int = 0, robot=None, **kwargs) -> list:
+    """Demonstrations of a named scenario ('box_assembly' or 'pole') for ``robot`` (a shipped
+    name, a description file or a RobotDescription; None: the iiwa 14)."""
     if scenario not in SCENARIOS:
         raise ValueError(f'unknown scenario {scenario!r}; known: {sorted(SCENARIOS)}')
+    if kwargs.get('kinematics') is None:
+        from mixture_ip_ros.robot.kinematics import RobotKinematics
+        kwargs['kinematics'] = RobotKinematics(robot)
     return SCENARIOS[scenario](seed, **kwargs)
 
 
 def write_scenario_bags(scenario: str, out_dir, seed: int = 0, occlusion: float = 0.0,
-                        storage: str = 'mcap', demos: Optional[list] = None) -> list:
+                        storage: str = 'mcap', demos: Optional[list] = None,
+                        robot=None) -> list:
     """Write one rosbag2 bag per demonstration into ``out_dir`` plus labels.json (evaluation only).
 
     ``out_dir`` must not exist or be empty. Returns the bag paths. labels.json maps bag name to
-    label and records the scenario and seed; the label is also in each bag's metadata custom_data.
+    label and records the scenario, seed and robot; the label, scenario, seed and robot are also
+    in each bag's metadata custom_data. Wrist poses are in the frame 'world', joint states carry
+    the robot's joint names. ``robot`` is used when ``demos`` is None (else the demos' own).
     """
     from mixture_ip_ros.io.bags import write_demonstration_bag
     out = Path(out_dir)
     if out.exists() and any(out.iterdir()):
         raise ValueError(f'{out} is not empty; refusing to mix demonstration sets')
     if demos is None:
-        demos = generate(scenario, seed, occlusion=occlusion)
+        demos = generate(scenario, seed, robot=robot, occlusion=occlusion)
+    robots = {d.robot.name for d in demos}
+    if len(robots) != 1:
+        raise ValueError(f'demonstrations of several robots {sorted(robots)}; one folder, '
+                         'one robot')
     out.mkdir(parents=True, exist_ok=True)
     paths = []
     for d in demos:
         paths.append(write_demonstration_bag(
             out / d.name, d.wrist_t, d.wrist_xyz, d.joint_t, d.joint_q, joint_qd=d.joint_qd,
-            storage=storage, label=d.label,
-            custom_data={'mixture_ip_ros.scenario': scenario, 'mixture_ip_ros.seed': str(seed)}))
+            storage=storage, label=d.label, joint_names=d.robot.joint_names,
+            custom_data={'mixture_ip_ros.scenario': scenario, 'mixture_ip_ros.seed': str(seed),
+                         'mixture_ip_ros.robot': d.robot.name}))
     labels = {'scenario': scenario, 'seed': seed, 'occlusion': occlusion,
-              'labels': {d.name: d.label for d in demos}}
+              'robot': robots.pop(), 'labels': {d.name: d.label for d in demos}}
     (out / LABEL_FILE).write_text(json.dumps(labels, indent=2, sort_keys=True) + '\n')
     return paths
+
+
+def read_scenario_robot(folder) -> str:
+    """The name of the robot a scenario folder was generated for (labels.json; a folder that does
+    not say is the default robot's)."""
+    path = Path(folder) / LABEL_FILE
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise ValueError(f'cannot read {path}: {exc}') from exc
+    return str(data.get('robot', DEFAULT_ROBOT)) if isinstance(data, dict) else DEFAULT_ROBOT
 
 
 def read_labels(folder) -> dict:

@@ -1,27 +1,27 @@
 """example-robot-data's human model (Gepetto's 36-DOF ISB body), for pictures only.
 
-The person stands across the table from the robot, facing it (-x of the base frame), and is posed
-per frame so that the right wrist follows a given wrist path: damped least squares over the right
-arm and a little torso lean, pulled towards a relaxed standing posture. Nothing here is simulated:
-the bodies only get kinematics (mj_kinematics), never dynamics.
+The person stands across the table from the robot, facing it (-x of the scene's world frame), and
+is posed per frame so that the right wrist follows a given wrist path (world frame): damped least
+squares over the right arm and a little torso lean, pulled towards a relaxed standing posture.
+Nothing here is simulated: the bodies only get kinematics (mj_kinematics), never dynamics.
 """
 
 from __future__ import annotations
 
 import functools
-from importlib import metadata
 from pathlib import Path
 
 import mujoco
 import numpy as np
 
+from mixture_ip_ros.robot.description import package_share
 from mixture_ip_ros.robot.scene import FLOOR_Z, TABLE_X
 
 PREFIX = 'human_'
 WRIST_BODY = 'right_hand'           # its origin is the wrist joint (right_wrist_Z)
 ROOT_BODY = 'middle_pelvis'
 # ISB axes: x forward, y up, z to the person's right. Facing the robot (-x), up +z, right is +y.
-BASE_FROM_ISB = np.array([[-1.0, 0.0, 0.0],
+WORLD_FROM_ISB = np.array([[-1.0, 0.0, 0.0],
                           [0.0, 0.0, 1.0],
                           [0.0, 1.0, 0.0]])
 # Standing spot of data/scenarios.py's person: about 1.35 m from the robot, body against the table
@@ -53,11 +53,10 @@ _SHOES = (0.10, 0.10, 0.10, 1.0)
 
 def human_description_dir() -> Path:
     """robots/human_description inside the installed example-robot-data (a cmeel package)."""
-    try:
-        dist = metadata.distribution('example-robot-data')
-    except metadata.PackageNotFoundError as err:
-        raise RuntimeError('example-robot-data is not installed') from err
-    path = Path(dist.locate_file('cmeel.prefix/share/example-robot-data/robots/human_description'))
+    share = package_share('example-robot-data')
+    if share is None:
+        raise RuntimeError('example-robot-data is not installed')
+    path = share / 'robots' / 'human_description'
     if not (path / 'robots' / 'human.urdf').is_file():
         raise RuntimeError(f'human model not found under {path}')
     return path
@@ -134,12 +133,12 @@ def add_human(spec: mujoco.MjSpec, pelvis_xy=DEFAULT_PELVIS_XY, floor_z: float =
     if height is None:
         height = pelvis_height()
     pos = [float(pelvis_xy[0]), float(pelvis_xy[1]), float(floor_z + height)]
-    frame = spec.worldbody.add_frame(pos=pos, quat=list(_quat(BASE_FROM_ISB)))
+    frame = spec.worldbody.add_frame(pos=pos, quat=list(_quat(WORLD_FROM_ISB)))
     frame.attach_body(human_spec().body(ROOT_BODY), PREFIX, '')
 
 
 class HumanPoser:
-    """Poses the attached human so its right wrist is at a target point (base frame)."""
+    """Poses the attached human so its right wrist is at a target point (world frame)."""
 
     def __init__(self, model: mujoco.MjModel, prefix: str = PREFIX):
         self.model = model

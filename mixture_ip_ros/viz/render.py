@@ -1,7 +1,8 @@
 """Offscreen pictures of a recorded closed-loop interaction: an animated GIF and a contact sheet.
 
 Rendering replays an InteractionRecord after the simulation (never inside the control loop): the
-robot at its recorded joint positions, the person (example-robot-data's human model) posed so its
+robot (record.extra['robot'], a shipped name or a description file; default the iiwa 14) at its
+recorded joint positions, the person (example-robot-data's human model) posed so its
 right wrist follows the recorded wrist, the wrist marker where the observer saw it (hidden while
 occluded), the paths so far, and an overlay with the estimator's belief: p(k | D) per interaction
 pattern, the estimated phase and whether the robot has committed.
@@ -30,7 +31,7 @@ from PIL import Image, ImageDraw, ImageFont  # noqa: E402
 
 from mixture_ip_ros.io.records import InteractionRecord  # noqa: E402
 from mixture_ip_ros.viz import human_model  # noqa: E402
-from mixture_ip_ros.robot.description import JOINT_NAMES  # noqa: E402
+from mixture_ip_ros.robot.description import load_description  # noqa: E402
 from mixture_ip_ros.robot.scene import HUMAN_WRIST, build_spec  # noqa: E402
 
 # Component colours (overlay bars, timeline); the k-th label gets the k-th colour.
@@ -47,7 +48,7 @@ TRAIL_SECONDS = 4.0        # trail length drawn in the scene
 
 @dataclass
 class CameraView:
-    """Free camera looking at `lookat` (base frame): MuJoCo's azimuth/elevation in degrees."""
+    """Free camera looking at `lookat` (world frame): MuJoCo's azimuth/elevation in degrees."""
 
     lookat: tuple = (0.62, 0.0, 0.25)
     distance: float = 2.3
@@ -160,11 +161,11 @@ class _OffscreenRenderer:
 
 # ---------------------------------------------------------------------------------- the scene
 def build_render_model(width: int = 640, height: int = 480, scene: dict | None = None,
-                       with_human: bool = True, pelvis_xy=None) -> mujoco.MjModel:
-    """The simulation scene (robot/scene.build_spec(**scene)) dressed for pictures: sky, floor
-    tiles, lights, a target marker, and the human standing at pelvis_xy (default: across the
-    table)."""
-    spec = build_spec(**(scene or {}))
+                       with_human: bool = True, pelvis_xy=None, robot=None) -> mujoco.MjModel:
+    """The simulation scene (robot/scene.build_spec(**scene) with ``robot``) dressed for
+    pictures: sky, floor tiles, lights, a target marker, and the human standing at pelvis_xy
+    (default: across the table)."""
+    spec = build_spec(**(scene or {}), robot=robot)
     # The scene's non-colliding geoms (floor, table legs, plate, screw) are visual-only; a spec
     # imported from URDF would drop them at compile time.
     spec.compiler.discardvisual = False
@@ -200,14 +201,14 @@ def build_render_model(width: int = 640, height: int = 480, scene: dict | None =
 
 
 # ---------------------------------------------------------------------------------- the record
-def _validate(record: InteractionRecord) -> None:
+def _validate(record: InteractionRecord, dof: int) -> None:
     def arr(name, ndim, cols=None):
         a = np.asarray(getattr(record, name), dtype=float)
         if a.ndim != ndim or (cols is not None and a.shape[1] != cols):
             want = f'(n, {cols})' if cols is not None else '(n,)'
             raise ValueError(f'record.{name} must have shape {want}, got {a.shape}')
         return a
-    t, q, flange = arr('t', 1), arr('q', 2, 7), arr('flange', 2, 3)
+    t, q, flange = arr('t', 1), arr('q', 2, dof), arr('flange', 2, 3)
     if t.size < 1 or q.shape[0] != t.size or flange.shape[0] != t.size:
         raise ValueError(f'record.t {t.shape}, q {q.shape} and flange {flange.shape} '
                          'must have the same, non-zero length')
@@ -232,16 +233,22 @@ def _validate(record: InteractionRecord) -> None:
 
 
 class _Replay:
-    """The record resampled at arbitrary times: what each frame shows."""
+    """The record resampled at arbitrary times: what each frame shows. Positions are moved from
+    the robot's base frame (the record's) to the scene's world frame (the picture's)."""
 
     def __init__(self, record: InteractionRecord):
-        _validate(record)
+        extra = record.extra if isinstance(record.extra, dict) else {}
+        self.robot = load_description(extra.get('robot'))
+        _validate(record, self.robot.dof)
+        to_world = self.robot.base_to_world()
         self.record = record
         self.t = np.asarray(record.t, float)
         self.q = np.asarray(record.q, float)
-        self.flange = np.asarray(record.flange, float)
+        self.flange = to_world.apply_array(np.asarray(record.flange, float))
+        self.target = (None if record.target is None
+                       else to_world.apply_array(np.asarray(record.target, float)))
         wt = np.asarray(record.wrist_t, float)
-        w = np.asarray(record.wrist, float)
+        w = to_world.apply_array(np.asarray(record.wrist, float).reshape(-1, 3))
         ok = np.all(np.isfinite(w), axis=1) & np.isfinite(wt)
         self.wrist_t, self.wrist = wt[ok], w[ok]
         order = np.argsort(self.wrist_t)
@@ -261,7 +268,7 @@ class _Replay:
         return float(self.record.onset_time) if self.record.onset_time is not None else self.t[0]
 
     def joints(self, time: float) -> np.ndarray:
-        return np.array([np.interp(time, self.t, self.q[:, j]) for j in range(7)])
+        return np.array([np.interp(time, self.t, self.q[:, j]) for j in range(self.q.shape[1])])
 
     def wrist_observed(self, time: float) -> np.ndarray | None:
         """The wrist as last seen, if seen within 2.5 sample periods; None while occluded."""
@@ -330,10 +337,12 @@ class InteractionRenderer:
         self.view_height = self.height - self.band_height
         if self.view_height < 16:
             raise ValueError(f'{width}x{height} leaves no room for the 3D view under the overlay')
-        self.model = build_render_model(self.width, self.view_height, scene, with_human)
+        self.model = build_render_model(self.width, self.view_height, scene, with_human,
+                                        robot=self.replay.robot)
         self.data = mujoco.MjData(self.model)
         self.camera = (camera or CameraView()).mjv_camera()
-        self._qadr = np.array([self.model.joint(n).qposadr[0] for n in JOINT_NAMES])
+        self._qadr = np.array([self.model.joint(n).qposadr[0]
+                               for n in self.replay.robot.joint_names])
         self._wrist_mocap = int(self.model.body(HUMAN_WRIST).mocapid[0])
         self._wrist_site = self.model.site(HUMAN_WRIST).id
         self._target_mocap = int(self.model.body(TARGET_MARKER).mocapid[0])
@@ -364,7 +373,7 @@ class InteractionRenderer:
             m.site_rgba[self._wrist_site, 3] = WRIST_RGBA[3]
         else:
             m.site_rgba[self._wrist_site, 3] = 0.0
-        target = r.record.target
+        target = r.target
         after_onset = r.record.onset_time is None or time >= r.record.onset_time
         d.mocap_pos[self._target_mocap] = (np.asarray(target, float)
                                            if target is not None and after_onset else (0, 0, -5))
