@@ -416,7 +416,7 @@ def test_latency_stats():
 def test_plans_pass_the_controllers_trajectory_acceptance(trained):
     """joint_trajectory_controller semantics (robot.trajectory): finite, strictly increasing,
     at rest at the end, not over before 'now' (start = onset, now = the latest observation
-    plus some delivery latency)."""
+    plus some delivery latency), and within the iiwa's joint limits from where it stands."""
     from mixture_ip_ros.robot.trajectory import points_from_arrays, validate_trajectory
     from mixture_ip_ros.robot.description import JOINT_NAMES
     model, _, held = trained
@@ -431,7 +431,8 @@ def test_plans_pass_the_controllers_trajectory_acceptance(trained):
         assert plan.final == (frac >= 1.0)
         pts = points_from_arrays(plan.times, plan.positions, plan.velocities, plan.accelerations)
         accepted = validate_trajectory(list(JOINT_NAMES), pts, onset, onset + t_now + 0.05,
-                                       list(JOINT_NAMES))
+                                       list(JOINT_NAMES), limits=_iiwa_limits(),
+                                       positions_now=plan.positions[0])
         assert not isinstance(accepted, str), accepted
 
 
@@ -730,11 +731,11 @@ def test_a_stream_on_another_clock_is_dropped_with_one_warning():
 
 # -- limits are law ---------------------------------------------------------------------------
 
-def _iiwa_limits(acceleration=20.0):
+def _iiwa_limits():
     from mixture_ip_ros.estimation.plans import JointLimits
     from mixture_ip_ros.robot.kinematics import RobotKinematics
     k = RobotKinematics()
-    return JointLimits(k.lower, k.upper, k.velocity_limit, np.full(7, acceleration))
+    return JointLimits(k.lower, k.upper, k.velocity_limit, k.acceleration_limit)
 
 
 def test_a_plan_too_fast_for_the_robot_is_slowed_down_along_the_same_path(trained):

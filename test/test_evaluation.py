@@ -147,3 +147,13 @@ def test_bad_arguments_are_rejected(tmp_path):
             d.label = None
         evaluate('box_assembly', tmp_path, demos=demo,
                  config=EvalConfig(candidates=(1,), model={'n_basis': 6}))
+
+
+def test_bad_data_leaves_no_output_folder(tmp_path):
+    """The output folder is made only once there is data to evaluate (an empty one would look
+    like a run that produced nothing)."""
+    (tmp_path / 'bags').mkdir()
+    (tmp_path / 'bags' / 'not_a_bag').mkdir()
+    with pytest.raises(ValueError):
+        evaluate('box_assembly', tmp_path / 'out', bag_dir=tmp_path / 'bags')
+    assert not (tmp_path / 'out').exists()

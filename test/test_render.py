@@ -18,7 +18,7 @@ GOAL = np.array([0.80, 0.02, 0.32])
 ROBOT_HAND_GOAL = np.array([0.70, 0.02, 0.32])
 
 
-def make_record(duration=2.0, onset=0.3, move=1.2, commit=0.7, robot_move=1.0, rate=100.0,
+def make_record(duration=2.0, onset=0.3, move=1.2, commit=0.7, robot_move=None, rate=100.0,
                 gap=(0.9, 1.1), robot=None):
     """A handover replayed without ROS: the person reaches from REST to GOAL, the robot (the
     real simulation and controller at 1 kHz) moves its hand from its home posture to
@@ -28,6 +28,9 @@ def make_record(duration=2.0, onset=0.3, move=1.2, commit=0.7, robot_move=1.0, r
     to_base = sim.description.world_to_base()
     HOME = sim.description.home_array()
     q_goal = sim.kinematics.ik(to_base.apply_array(ROBOT_HAND_GOAL), HOME)
+    if robot_move is None:     # 1 s, or as long as the joints' speed limits need (the sim checks)
+        robot_move = max(1.0, 1.1 * 1.875 * np.max(np.abs(q_goal - HOME)
+                                                    / sim.kinematics.velocity_limit))
     s = np.linspace(0.0, 1.0, 11)
     pos = HOME + np.outer(10 * s**3 - 15 * s**4 + 6 * s**5, q_goal - HOME)
     vel = np.outer((30 * s**2 - 60 * s**3 + 30 * s**4) / robot_move, q_goal - HOME)
@@ -197,7 +200,7 @@ def test_human_model_stands_on_the_floor():
 
 
 def test_record_without_estimate_or_wrist_still_renders(available, tmp_path):
-    rec = make_record(duration=0.6, onset=0.1, move=0.4, commit=0.3, robot_move=0.2, gap=(0, 0))
+    rec = make_record(duration=0.6, onset=0.1, move=0.4, commit=0.3, gap=(0, 0))
     rec.wrist[:] = np.nan                       # the person was never seen
     rec.posterior_t = np.zeros(0)
     rec.posterior = np.zeros((0, 3))

@@ -9,23 +9,27 @@ from mixture_ip_ros.robot.controller import ComputedTorqueController, default_ga
 from mixture_ip_ros.robot.description import DEFAULT, JOINT_NAMES, shipped_robots
 from mixture_ip_ros.robot.kinematics import RobotKinematics
 from mixture_ip_ros.robot.sim import RobotSimulation
-from mixture_ip_ros.robot.trajectory import points_from_arrays
+from mixture_ip_ros.robot.trajectory import points_from_arrays, validate_trajectory
 
 HOME = DEFAULT.home_array()
 
 J = list(JOINT_NAMES)
-# Across the workspace: base swings 1.6 rad, shoulder and elbow open up, the wrist turns.
-Q_A = np.array([-0.8, 0.3, 0.5, -1.6, -0.4, 0.8, -0.5])
-Q_B = np.array([0.8, 1.0, -0.5, -0.6, 0.5, 1.5, 0.8])
+# Across the workspace: base swings 1.5 rad, shoulder and elbow open up, the wrist turns; in
+# 2 s at most 1.41 rad/s on joint 1 (limit 1.48: the sim refuses faster trajectories).
+Q_A = np.array([-0.75, 0.3, 0.5, -1.6, -0.4, 0.8, -0.5])
+Q_B = np.array([0.75, 1.0, -0.5, -0.6, 0.5, 1.5, 0.8])
 DURATION = 2.0
 
 
 def across_the_workspace(kin):
     """A move for any arm: from its home posture turned 0.8 rad one way to 0.8 rad the other,
-    every other joint moving by 0.5 rad (alternating), within the joint limits."""
+    every other joint moving by 0.5 rad (alternating), within the joint limits (positions, and
+    speeds in DURATION: a minimum-jerk move peaks at 1.875 times its mean speed)."""
     home = kin.description.home_array()
     step = 0.5 * (-1.0) ** np.arange(kin.dof)
     step[0] = 0.8
+    fastest = 0.95 * kin.velocity_limit * DURATION / 1.875 / 2
+    step = np.sign(step) * np.minimum(np.abs(step), fastest)
     lo, hi = kin.lower + 0.05, kin.upper - 0.05
     return np.clip(home - step, lo, hi), np.clip(home + step, lo, hi)
 
@@ -96,10 +100,12 @@ def test_bounded_error_with_masses_ten_percent_too_high():
 
 def test_torques_never_exceed_the_limits():
     sim = RobotSimulation(q0=Q_A)
-    # The same move in 0.3 s asks for far more torque than the motors have.
+    # The same move in 0.3 s asks for far more torque than the motors have. The sim refuses
+    # it (beyond the speed limits), so it goes to the controller directly.
     t_points = np.linspace(0.0, 0.3, 7)
     points = points_from_arrays(t_points, *minimum_jerk(Q_A, Q_B, 0.3, t_points))
-    assert sim.set_trajectory(J, points) is None
+    assert 'beyond its limits' in sim.set_trajectory(J, points)
+    sim.follower.set(validate_trajectory(J, points, None, 0.0, J))
     limit = sim.kinematics.effort_limit
     saturated = 0
     for _ in range(1500):

@@ -228,6 +228,107 @@ def test_header_stamp_zero_starts_now():
 
 # ---------------------------------------------------------------------- in the simulation
 
+# The probe of issue 13: what sim_node accepted before it enforced the joint limits. Each case
+# is a trajectory from the arm's home posture; the reason names the rule and the joint.
+def _probe_cases(sim):
+    """(name, points, start, expected words in the reason) for the arm of ``sim``."""
+    k, home, n = sim.kinematics, sim.description.home_array(), sim.dof
+    beyond = home.copy()
+    beyond[0] = k.upper[0] + 0.5              # e.g. 10 rad on joint 1 (iiwa limit 2.97)
+    far = np.full(n, 1e6)
+    sudden = home + np.eye(n)[0]              # 1 rad in 25 ms: as fast as 2 rad in 50 ms
+    fast = [0.0] * n
+    fast[0] = 10.0                            # 10 rad/s
+    acc = [0.0] * n
+    acc[0] = 2.0 * float(k.acceleration_limit[0])
+    rest = [0.0] * n
+    return [
+        ('position beyond', [TrajectoryPoint(2.0, beyond.tolist(), rest)], None,
+         ['point 0', sim.joint_names[0], 'position', 'beyond its limits']),
+        ('1e6 rad', [TrajectoryPoint(2.0, far.tolist(), rest)], None, ['position', 'beyond']),
+        ('40 rad/s between points', [TrajectoryPoint(1.0, home.tolist(), rest),
+                                     TrajectoryPoint(1.025, sudden.tolist(), rest)], None,
+         ['points 0 to 1', sim.joint_names[0], 'moves 40 rad/s on average, above its limit']),
+        ('10 rad/s', [TrajectoryPoint(1.0, home.tolist(), fast),
+                      TrajectoryPoint(3.0, home.tolist(), rest)], None,
+         ['velocity 10 rad/s beyond']),
+        ('acceleration', [TrajectoryPoint(1.0, home.tolist(), rest, acc),
+                          TrajectoryPoint(3.0, home.tolist(), rest, [0.0] * n)], None,
+         ['acceleration', 'beyond']),
+        ('first point at -1 s, elsewhere', [TrajectoryPoint(-1.0, (home + 0.3).tolist(), rest),
+                                            TrajectoryPoint(2.0, home.tolist(), rest)], None,
+         ['first point (at or before now) jumps']),
+        ('first point at 0, elsewhere', [TrajectoryPoint(0.0, (home + 0.3).tolist(), rest)],
+         None, ['first point (at or before now) jumps']),
+        ('first point too soon', [TrajectoryPoint(0.05, (home + 0.3).tolist(), rest)], None,
+         ['first point (0.05 s from now) jumps']),
+        ('stamped so the first point is due now',
+         [TrajectoryPoint(1.0, (home + 0.3).tolist(), rest)], sim.time - 1.0,
+         ['at or before now']),
+        ('100,000 points', points_from_arrays(np.arange(1, 100_001) * 0.01,
+                                              np.tile(home, (100_000, 1))), None,
+         ['100000 points, more than the 10000 allowed']),
+    ]
+
+
+@pytest.mark.parametrize('robot', shipped_robots())
+def test_the_simulation_refuses_what_a_controller_with_joint_limits_refuses(robot):
+    logged = []
+    sim = RobotSimulation(robot=robot, logger=logged.append)
+    home = sim.description.home_array()
+    cases = _probe_cases(sim)
+    for name, points, start, words in cases:
+        why = sim.set_trajectory(sim.joint_names, points, start)
+        assert why is not None, name
+        assert all(w in why for w in words), (name, why)
+    assert sim.rejection_count == len(cases) and sim.accepted_count == 0
+    assert len(logged) == len(cases)                          # one warning each
+    assert all(m.startswith('trajectory rejected: ') and '\n' not in m for m in logged)
+    sim.step(200)                                            # the arm holds where it was
+    np.testing.assert_allclose(sim.q, home, atol=1e-5)
+    assert np.abs(sim.qd).max() < 1e-3
+
+
+@pytest.mark.parametrize('robot', shipped_robots())
+def test_moves_at_the_limits_are_accepted(robot):
+    """The rules refuse nothing a careful plan does: a first point at the present position now,
+    a minimum-jerk move whose peak speed is 95 % of a joint's limit, positions at the limits."""
+    sim = RobotSimulation(robot=robot)
+    k, home, n = sim.kinematics, sim.description.home_array(), sim.dof
+    T = 2.0
+    goal = home.copy()
+    goal[0] = home[0] + 0.95 * k.velocity_limit[0] * T / 1.875
+    assert goal[0] < k.upper[0]
+    t = np.linspace(0.0, T, 41)
+    s = t / T
+    pos = home + np.outer(10 * s**3 - 15 * s**4 + 6 * s**5, goal - home)
+    vel = np.outer((30 * s**2 - 60 * s**3 + 30 * s**4) / T, goal - home)
+    assert sim.set_trajectory(sim.joint_names, points_from_arrays(t, pos, vel)) is None
+    at_limits = np.where(np.arange(n) % 2, k.upper, k.lower)
+    assert isinstance(validate_trajectory(sim.joint_names, points_from_arrays([60.0], [at_limits]),
+                                          None, 0.0, sim.joint_names, limits=sim.limits,
+                                          positions_now=home), JointTrajectory)
+
+
+def test_limit_checks_are_independent_of_the_message_joint_order():
+    """A permuted message is checked against each joint's own limits (oracle: the limits looked
+    up by name)."""
+    sim = RobotSimulation()
+    names = sim.joint_names[::-1]
+    home = sim.description.home_array()[::-1]
+    j = sim.joint_names.index('iiwa_joint_4')              # the narrowest speed limit
+    limit = sim.kinematics.velocity_limit[j]
+    for speed, ok in ((0.99 * limit, True), (1.01 * limit, False)):
+        v = np.zeros(7)
+        v[names.index('iiwa_joint_4')] = speed
+        why = sim.set_trajectory(names, [TrajectoryPoint(1.0, home.tolist(), v.tolist()),
+                                         TrajectoryPoint(10.0, home.tolist(), [0.0] * 7)])
+        assert (why is None) == ok, why
+        if not ok:
+            assert 'iiwa_joint_4 velocity' in why
+
+
+
 @pytest.mark.parametrize('robot', shipped_robots())
 def test_simulation_counts_and_logs_rejections(robot):
     logged = []

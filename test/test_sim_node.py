@@ -134,6 +134,42 @@ def test_bad_trajectories_are_rejected_and_counted(sim):
     assert sim.accepted_count == 0
 
 
+def test_trajectories_beyond_the_limits_are_refused_one_warning_each_and_the_arm_holds(
+        harness, capfd):
+    """The probe's commands over DDS: beyond a joint's range, 1e6 rad, too fast between points,
+    a first point that jumps, 100,000 points (refused by its length before it is read)."""
+    h = Sim(harness, max_trajectory_points=1000)
+    sim = h.sim_node.sim
+    h.spin_until(lambda: h.pub.get_subscription_count() > 0 and h.joint_states)
+    upper = sim.kinematics.upper
+    beyond = HOME.copy()
+    beyond[0] = upper[0] + 0.5
+    sudden = _trajectory(HOME + 1.0, 0.5)
+    sudden.points = [JointTrajectoryPoint(positions=HOME.tolist(), time_from_start=_duration(1.0)),
+                     JointTrajectoryPoint(positions=(HOME + 0.5).tolist(),
+                                          time_from_start=_duration(1.05))]
+    huge = JointTrajectory(joint_names=list(JOINT_NAMES))
+    point = JointTrajectoryPoint(positions=HOME.tolist())
+    huge.points = [JointTrajectoryPoint(positions=point.positions,
+                                        time_from_start=_duration(0.01 * (i + 1)))
+                   for i in range(100_000)]
+    capfd.readouterr()
+    for msg in (_trajectory(beyond, 2.0), _trajectory(np.full(7, 1e6), 2.0), sudden,
+                _trajectory(HOME + 0.3, 0.0), huge):
+        h.pub.publish(msg)
+    h.spin_until(lambda: h.sim_node.rejection_count == 5, timeout=30.0)
+    now = sim.time
+    h.spin_until(lambda: sim.time > now + 0.5)
+    assert sim.accepted_count == 0
+    assert 'more than the 1000 allowed' in h.sim_node.last_rejection
+    np.testing.assert_allclose(h.joint_states[-1].position, HOME, atol=1e-5)   # held
+    warnings = [line for line in capfd.readouterr().err.splitlines() if 'rejected' in line]
+    assert len(warnings) == 5 and all('[WARN]' in line for line in warnings), warnings
+    for words in ('position 3.4', 'position 1e+06', 'on average, above its limit',
+                  'first point (at or before now) jumps', '100000 points'):
+        assert any(words in line for line in warnings), words
+
+
 def _executable(*params, **popen):
     env = dict(os.environ, ROS_DOMAIN_ID=str(private_domain_id()))
     args = [sys.executable, '-m', 'mixture_ip_ros.nodes.sim_node', '--ros-args',

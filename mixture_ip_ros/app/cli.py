@@ -142,6 +142,7 @@ NODE_SCHEMAS = {'estimator_node': 'mixture_ip_ros.nodes.estimator_node:Estimator
 def _params(args):
     import importlib
     import re
+    from mixture_ip_ros.io.files import write_text_atomic
     from mixture_ip_ros.nodes.params import markdown_table
     nodes = sorted(NODE_SCHEMAS) if args.node == 'all' else [args.node]
     tables = {}
@@ -158,7 +159,7 @@ def _params(args):
         if not block.search(text):
             raise ValueError(f'{path} has no block <!-- parameters: {node} --> ... <!-- end -->')
         text = block.sub(lambda m: m.group(1) + table + m.group(2), text)
-    path.write_text(text)
+    write_text_atomic(path, text)
     print(f'updated the parameter tables of {", ".join(nodes)} in {path}')
 
 

@@ -19,6 +19,7 @@ import numpy as np
 
 from mixture_ip_ros.io.bags import read_bag
 from mixture_ip_ros.io.dataset import load_demonstration
+from mixture_ip_ros.io.files import write_text_atomic
 from mixture_ip_ros.scenarios.generated import (read_labels, read_scenario_robot,
                                                 write_scenario_bags)
 from mixture_ip_ros.robot.description import DEFAULT_ROBOT, load_description
@@ -117,7 +118,7 @@ def run_demo(args):
     print(json.dumps({k: v for k, v in report.items() if k != 'interactions'}, indent=1))
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps(report, indent=1) + '\n')
+        write_text_atomic(args.json, json.dumps(report, indent=1) + '\n')
     plot_demo(records, out_dir)
     print(f'plots in {out_dir}')
     if args.render:
@@ -192,9 +193,7 @@ def render_all(records, render_dir: Path):
 def plot_demo(records, out_dir: Path):
     """Per interaction: wrist and robot hand paths (top view and height over time) and the
     component posterior over time, with the onset, commit and end marked."""
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
+    from mixture_ip_ros.viz.plots import plt, save_figure   # matplotlib on the Agg backend
     for rec in records:
         fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
         t0 = rec.onset_time if rec.onset_time is not None else (rec.t[0] if len(rec.t) else 0.0)
@@ -224,5 +223,4 @@ def plot_demo(records, out_dir: Path):
                   title=f'true {rec.true_pattern}, chosen {rec.chosen_pattern}')
         ax[2].legend(fontsize=7)
         fig.tight_layout()
-        fig.savefig(out_dir / f'{rec.name}.png', dpi=90)
-        plt.close(fig)
+        save_figure(fig, out_dir / f'{rec.name}.png', dpi=90)

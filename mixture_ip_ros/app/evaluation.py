@@ -37,6 +37,7 @@ from mixture_ip_ros.core.mixture import MixtureIProMP, controlled_rms, select_n_
 from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.app.training import component_labels
 from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE
+from mixture_ip_ros.io.files import write_text_atomic
 from mixture_ip_ros.scenarios.generated import LETTER_OBSERVATION_NOISE
 
 logger = logging.getLogger(__name__)
@@ -119,7 +120,6 @@ def evaluate(scenario: str, out_dir: Path, seed: int = 0, quick: bool = False, *
         raise ValueError(f'scenario {scenario!r} uses generated letters only; '
                          'bag_dir/demos are for box_assembly and pole')
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     from mixture_ip_ros.scenarios import generated as scen
     t0 = time.perf_counter()
     if scenario in ('box_assembly', 'pole'):
@@ -132,18 +132,21 @@ def evaluate(scenario: str, out_dir: Path, seed: int = 0, quick: bool = False, *
         else:
             demos = [g.to_demonstration() for g in scen.generate(scenario, seed)]
             source = f'generated seed {seed}'
+        out_dir.mkdir(parents=True, exist_ok=True)     # only once there is data to evaluate
         if scenario == 'box_assembly':
             metrics = evaluate_box_assembly(demos, out_dir, config or box_config(quick))
         else:
             metrics = evaluate_pole(demos, out_dir, config or pole_config(quick))
     elif scenario == 'gestures':
         from mixture_ip_ros.scenarios import gestures
+        out_dir.mkdir(parents=True, exist_ok=True)
         metrics = evaluate_gestures(
             gestures.gesture_demonstrations('train'), gestures.gesture_demonstrations('test'),
             out_dir, config or gesture_config(quick), seed)
         source = gestures.SOURCE
     else:
         cfg = config or letter_config(quick)
+        out_dir.mkdir(parents=True, exist_ok=True)
         if scenario == 'phase':
             metrics = evaluate_phase(scen.phase_letters(seed), out_dir, cfg)
         else:
@@ -152,7 +155,7 @@ def evaluate(scenario: str, out_dir: Path, seed: int = 0, quick: bool = False, *
     metrics = {'scenario': scenario, 'seed': int(seed), 'quick': bool(quick), 'source': source,
                **metrics, 'runtime_s': round(time.perf_counter() - t0, 2)}
     metrics = _jsonable(metrics)
-    (out_dir / 'metrics.json').write_text(json.dumps(metrics, indent=1) + '\n')
+    write_text_atomic(out_dir / 'metrics.json', json.dumps(metrics, indent=1) + '\n')
     return metrics
 
 

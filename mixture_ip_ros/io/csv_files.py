@@ -14,12 +14,14 @@ is not a number is an error. Errors name the file and the line, in one line.
 from __future__ import annotations
 
 import csv
+import io
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
 from mixture_ip_ros.core.demonstration import Demonstration, Layout
+from mixture_ip_ros.io.files import write_text_atomic
 
 
 class CsvError(ValueError):
@@ -106,12 +108,12 @@ def write_csv_demonstration(path, demo: Demonstration, layout: Layout, time: str
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     a = np.column_stack([demo.t, demo.observed, demo.controlled])
-    with open(path, 'w', newline='') as f:
-        w = csv.writer(f)
-        w.writerow([time, *layout.observed, *layout.controlled])
-        for row in a:
-            w.writerow(['' if np.isnan(v) else repr(float(v)) for v in row])
-    return path
+    text = io.StringIO(newline='')
+    w = csv.writer(text)
+    w.writerow([time, *layout.observed, *layout.controlled])
+    for row in a:
+        w.writerow(['' if np.isnan(v) else repr(float(v)) for v in row])
+    return write_text_atomic(path, text.getvalue())
 
 
 def parse_names(text: str | None, what: str) -> Sequence[str]:

@@ -41,7 +41,7 @@ from mixture_ip_ros.nodes.managed import ManagedNode, run_node
 from mixture_ip_ros.nodes.params import autostart_param, finite_list, param, positive
 from mixture_ip_ros.robot.description import DEFAULT_ROBOT, load_description, shipped_robots
 from mixture_ip_ros.robot.sim import RobotSimulation
-from mixture_ip_ros.robot.trajectory import TrajectoryPoint
+from mixture_ip_ros.robot.trajectory import DEFAULT_MAX_POINTS, TrajectoryPoint, too_many_points
 
 _DEFAULT = load_description(DEFAULT_ROBOT)
 PER_JOINT = ('initial_positions', 'natural_frequency', 'damping_ratio')
@@ -89,6 +89,8 @@ class SimParameters:
     stands: bool = param(True, 'the plate and screw stands of box assembly in the scene')
     base_frame: str = param(_DEFAULT.base_frame, 'frame of iiwa/flange_pose',
                             from_robot=True)
+    max_trajectory_points: int = param(DEFAULT_MAX_POINTS, 'longer trajectories are refused '
+                                       'before they are read', low=2, high=10_000_000)
     max_catch_up: float = param(0.1, 'wall-clock mode: the largest backlog (s) caught up on '
                                      'in one go', low=0.0, high=10.0)
 
@@ -135,7 +137,8 @@ class SimNode(ManagedNode):
             controller_mass_scale=p.controller_mass_scale,
             allow_partial_joints_goal=p.allow_partial_joints_goal,
             allow_nonzero_velocity_at_trajectory_end=p.allow_nonzero_velocity_at_trajectory_end,
-            open_loop_control=p.open_loop_control, logger=self.get_logger().warning)
+            open_loop_control=p.open_loop_control, logger=self.get_logger().warning,
+            max_trajectory_points=p.max_trajectory_points)
         self.steps_per_publish = max(1, int(round(1.0 / (p.publish_rate * self.sim.dt))))
         self.publish_period = self.steps_per_publish * self.sim.dt
         state = qos.reliable(10)
@@ -199,6 +202,10 @@ class SimNode(ManagedNode):
                 self.sim.cancel_trajectory()
                 self.get_logger().info('empty trajectory: stopping and holding the position')
                 return
+            why = too_many_points(len(msg.points), self.sim.max_trajectory_points)
+            if why:
+                self.sim.refuse(why)
+                return
             points = [TrajectoryPoint(stamp_to_ns(p.time_from_start) * 1e-9, p.positions,
                                       p.velocities, p.accelerations) for p in msg.points]
             stamp_ns = stamp_to_ns(msg.header.stamp)
@@ -207,9 +214,7 @@ class SimNode(ManagedNode):
                      else self.sim.time + (stamp_ns - self._ros_now_ns()) * 1e-9)
             self.sim.set_trajectory(list(msg.joint_names), points, start)
         except Exception as error:  # a bad message must never kill the node
-            self.sim.rejection_count += 1
-            self.sim.last_rejection = f'malformed trajectory: {error}'
-            self.get_logger().error(self.sim.last_rejection)
+            self.sim.refuse(f'malformed trajectory: {error}')
 
     def _on_timer(self) -> None:
         p = self.params

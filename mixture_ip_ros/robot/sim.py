@@ -11,8 +11,9 @@ import numpy as np
 from mixture_ip_ros.robot.controller import ComputedTorqueController
 from mixture_ip_ros.robot.kinematics import RobotKinematics
 from mixture_ip_ros.robot.scene import FLANGE_SITE, HUMAN_WRIST, build_scene
-from mixture_ip_ros.robot.trajectory import (TrajectoryFollower, TrajectoryPoint,
-                                             validate_trajectory)
+from mixture_ip_ros.estimation.plans import JointLimits
+from mixture_ip_ros.robot.trajectory import (DEFAULT_MAX_POINTS, TrajectoryFollower,
+                                             TrajectoryPoint, validate_trajectory)
 
 
 class RobotSimulation:
@@ -29,7 +30,8 @@ class RobotSimulation:
                  natural_frequency=None, damping_ratio=None, kp=None, kd=None,
                  controller_mass_scale: float = 1.0, allow_partial_joints_goal: bool = False,
                  allow_nonzero_velocity_at_trajectory_end: bool = False,
-                 open_loop_control: bool = False, logger=None, robot=None, **scene_kwargs):
+                 open_loop_control: bool = False, logger=None, robot=None,
+                 max_trajectory_points: int | None = DEFAULT_MAX_POINTS, **scene_kwargs):
         self.kinematics = RobotKinematics(robot)
         self.description = description = self.kinematics.description
         self.model = model if model is not None else build_scene(
@@ -48,6 +50,10 @@ class RobotSimulation:
         self.follower = TrajectoryFollower(n, open_loop=open_loop_control)
         self.allow_partial_joints_goal = allow_partial_joints_goal
         self.allow_nonzero_velocity_at_trajectory_end = allow_nonzero_velocity_at_trajectory_end
+        k = self.kinematics
+        # Enforced on every trajectory, as by a controller with joint limits on.
+        self.limits = JointLimits(k.lower, k.upper, k.velocity_limit, k.acceleration_limit)
+        self.max_trajectory_points = max_trajectory_points
         self.rejection_count = 0
         self.last_rejection: str | None = None
         self.accepted_count = 0
@@ -145,15 +151,22 @@ class RobotSimulation:
             joint_names, points, start_time, self.time, self.joint_names,
             allow_partial_joints_goal=self.allow_partial_joints_goal,
             allow_nonzero_velocity_at_trajectory_end=self.allow_nonzero_velocity_at_trajectory_end,
-            fill_positions=fill)
+            fill_positions=fill, limits=self.limits,
+            positions_now=fill if self.follower.open_loop else self.q,
+            control_period=self.dt, max_points=self.max_trajectory_points)
         if isinstance(result, str):
-            self.rejection_count += 1
-            self.last_rejection = result
-            self._log(f'trajectory rejected: {result}')
-            return result
+            return self.refuse(result)
         self.accepted_count += 1
         self.follower.set(result)
         return None
+
+    def refuse(self, reason: str) -> str:
+        """Count and log a refused trajectory (one warning each); what the arm is doing goes on
+        (holding, or the trajectory accepted before), as a controller rejecting a goal."""
+        self.rejection_count += 1
+        self.last_rejection = reason
+        self._log(f'trajectory rejected: {reason}')
+        return reason
 
     def cancel_trajectory(self) -> None:
         """Drop the trajectory and hold the current position."""

@@ -2,8 +2,9 @@
 
 Acceptance (validate_trajectory) follows JointTrajectoryController::validate_trajectory_msg with
 the default parameters (allow_partial_joints_goal=false, allow_nonzero_velocity_at_trajectory_end=
-false, allow_integration_in_goal_trajectories=false) plus checks JTC lacks: every value finite and
-no duplicate joint names. Interpolation (TrajectoryFollower) follows JTC's Trajectory::sample:
+false, allow_integration_in_goal_trajectories=false) plus checks JTC lacks: every value finite, no
+duplicate joint names, the joint limits (positions, speeds, accelerations, the mean speed between
+points, a reachable first point) and a cap on the number of points. Interpolation (TrajectoryFollower) follows JTC's Trajectory::sample:
 per segment linear when either end lacks velocities, cubic with velocities, quintic with velocities
 and accelerations; before the first point, a segment from the state measured when the trajectory
 is first sampled; after the last point, hold it. Times are seconds on the caller's clock; None as a
@@ -18,6 +19,8 @@ from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
+
+from mixture_ip_ros.estimation.plans import JointLimits
 
 
 @dataclass
@@ -67,15 +70,45 @@ def points_from_arrays(times, positions, velocities=None,
     return out
 
 
+# A minute and a half at 100 Hz: far more than any plan, and validated in milliseconds.
+DEFAULT_MAX_POINTS = 10_000
+
+
+def too_many_points(n_points: int, max_points: int | None) -> str | None:
+    """Why a trajectory of ``n_points`` is refused by the ``max_points`` rule, or None. Apart so
+    that a node can apply it before converting a huge message point by point."""
+    if max_points is not None and n_points > max_points:
+        return f'{n_points} points, more than the {max_points} allowed (max_trajectory_points)'
+    return None
+
+
+def _beyond(values, low, high, index, names, what: str, unit: str) -> str | None:
+    """The first point and joint whose value lies outside [low, high], said in one line."""
+    bad = (values < low[index]) | (values > high[index])
+    if not bad.any():
+        return None
+    i, j = (int(x) for x in np.argwhere(bad)[0])
+    return (f'point {i}: {names[j]} {what} {values[i, j]:.6g} {unit} beyond its limits '
+            f'[{low[index[j]]:.6g}, {high[index[j]]:.6g}]')
+
+
 def validate_trajectory(joint_names: Sequence[str], points: Sequence[TrajectoryPoint],
                         start_time: float | None, now: float, controller_joints: Sequence[str], *,
                         allow_partial_joints_goal: bool = False,
                         allow_nonzero_velocity_at_trajectory_end: bool = False,
-                        fill_positions=None) -> JointTrajectory | str:
+                        fill_positions=None, limits: JointLimits | None = None,
+                        positions_now=None, control_period: float = 0.0,
+                        max_points: int | None = None) -> JointTrajectory | str:
     """The accepted trajectory in controller joint order, or the reason for rejecting it.
 
     start_time: when time_from_start = 0 happens, on the same clock as `now` (None: start now).
     fill_positions: positions (controller order) used for joints a partial goal leaves out.
+    With ``limits`` (controller order), as a controller that enforces joint limits: every
+    point's positions, velocities and accelerations within them, no mean speed between two
+    points above the speed limit, and, given ``positions_now`` (the arm's present positions),
+    a first point the arm can reach in time: one due within ``control_period`` of now (a first
+    point at or before time zero) must not jump. ``max_points`` caps the length. Every check
+    is on arrays: a long trajectory is refused or accepted without a Python loop per value.
     """
     dof = len(controller_joints)
     names = list(joint_names)
@@ -89,60 +122,93 @@ def validate_trajectory(joint_names: Sequence[str], points: Sequence[TrajectoryP
             return f'unknown joint {name!r}'
     if len(set(names)) != len(names):
         return 'duplicate joint names'
-    if len(points) == 0:
+    m, n = len(points), len(names)
+    if m == 0:
         return 'empty trajectory: no points'
-    n = len(names)
-    for i, point in enumerate(points):
-        for field_name, allow_empty in (('positions', False), ('velocities', True),
-                                        ('accelerations', True)):
-            values = getattr(point, field_name)
-            if allow_empty and len(values) == 0:
-                continue
-            if len(values) != n:
-                return (f'point {i}: {field_name} has {len(values)} values for {n} joint names')
-            if not np.all(np.isfinite(np.asarray(values, dtype=float))):
-                return f'point {i}: non-finite value in {field_name}'
-        if not np.isfinite(point.time_from_start):
-            return f'point {i}: non-finite time_from_start'
-        if i > 0 and not point.time_from_start > points[i - 1].time_from_start:
-            return (f'time_from_start not strictly increasing at point {i} '
-                    f'({points[i - 1].time_from_start} then {point.time_from_start})')
+    why = too_many_points(m, max_points)
+    if why:
+        return why
+    arrays = {}
+    for field_name, allow_empty in (('positions', False), ('velocities', True),
+                                    ('accelerations', True)):
+        lengths = np.array([len(getattr(p, field_name)) for p in points])
+        given = lengths > 0 if allow_empty else np.ones(m, dtype=bool)
+        wrong = np.flatnonzero(given & (lengths != n))
+        if wrong.size:
+            i = int(wrong[0])
+            return f'point {i}: {field_name} has {lengths[i]} values for {n} joint names'
+        values = np.zeros((m, n))
+        if given.any():
+            values[given] = np.array([getattr(p, field_name) for p, g in zip(points, given) if g],
+                                     dtype=float).reshape(-1, n)
+        finite = np.isfinite(values).all(axis=1)
+        if not finite.all():
+            return f'point {int(np.argmin(finite))}: non-finite value in {field_name}'
+        arrays[field_name] = (values, given)
+    times = np.array([p.time_from_start for p in points], dtype=float)
+    if not np.isfinite(times).all():
+        return f'point {int(np.argmin(np.isfinite(times)))}: non-finite time_from_start'
+    steps = np.diff(times)
+    if (steps <= 0).any():
+        i = int(np.argmax(steps <= 0)) + 1
+        return (f'time_from_start not strictly increasing at point {i} '
+                f'({times[i - 1]} then {times[i]})')
     if start_time is not None:
         if not np.isfinite(start_time):
             return 'non-finite start time'
-        end = start_time + points[-1].time_from_start
+        end = start_time + times[-1]
         if end < now:
             return f'trajectory ends in the past (ends at {end:.6f}, now {now:.6f})'
+    pos, _ = arrays['positions']
+    vel, has_v = arrays['velocities']
+    acc, has_a = arrays['accelerations']
     if not allow_nonzero_velocity_at_trajectory_end:
-        last = np.asarray(points[-1].velocities, dtype=float)
         # Same threshold as JTC: float epsilon.
-        if last.size and np.any(np.abs(last) > np.finfo(np.float32).eps):
+        if has_v[-1] and np.any(np.abs(vel[-1]) > np.finfo(np.float32).eps):
             return 'velocity of the last point is not zero'
 
-    index = [list(controller_joints).index(name) for name in names]
-    m = len(points)
-    times = np.array([p.time_from_start for p in points], dtype=float)
-    pos = np.zeros((m, dof))
-    vel = np.zeros((m, dof))
-    acc = np.zeros((m, dof))
-    has_v = np.array([len(p.velocities) > 0 for p in points])
-    has_a = np.array([len(p.accelerations) > 0 for p in points])
+    index = np.array([list(controller_joints).index(name) for name in names])
+    if limits is not None:
+        why = (_beyond(pos, limits.lower, limits.upper, index, names, 'position', 'rad')
+               or _beyond(vel, -limits.velocity, limits.velocity, index, names, 'velocity',
+                          'rad/s')
+               or _beyond(acc, -limits.acceleration, limits.acceleration, index, names,
+                          'acceleration', 'rad/s^2'))
+        if why:
+            return why
+        speed = np.abs(np.diff(pos, axis=0)) / steps[:, None]
+        over = speed > limits.velocity[index]
+        if over.any():
+            i, j = (int(x) for x in np.argwhere(over)[0])
+            return (f'points {i} to {i + 1}: {names[j]} moves {speed[i, j]:.3g} rad/s on '
+                    f'average, above its limit {limits.velocity[index[j]]:.3g} rad/s')
+        if positions_now is not None:
+            due = (now if start_time is None else start_time) + times[0] - now
+            gap = np.abs(pos[0] - np.asarray(positions_now, dtype=float)[index])
+            reach = limits.velocity[index] * max(due, control_period)
+            if (gap > reach).any():
+                j = int(np.argmax(gap - reach))
+                when = ('at or before now' if due <= control_period
+                        else f'{due:.3g} s from now')
+                return (f'first point ({when}) jumps: {names[j]} is {gap[j]:.3g} rad away, '
+                        f'{reach[j]:.3g} rad reachable at its speed limit')
+
+    out_pos = np.zeros((m, dof))
+    out_vel = np.zeros((m, dof))
+    out_acc = np.zeros((m, dof))
     if n < dof:
         if fill_positions is None:
             return 'partial goal but no positions to fill the missing joints'
         fill = np.asarray(fill_positions, dtype=float)
         if fill.shape != (dof,) or not np.all(np.isfinite(fill)):
             return 'partial goal but fill positions are not finite'
-        pos[:] = fill
-    for i, p in enumerate(points):
-        pos[i, index] = p.positions
-        if has_v[i]:
-            vel[i, index] = p.velocities
-        if has_a[i]:
-            acc[i, index] = p.accelerations
+        out_pos[:] = fill
+    out_pos[:, index] = pos
+    out_vel[:, index] = vel
+    out_acc[:, index] = acc
     return JointTrajectory(start_time=None if start_time is None else float(start_time),
-                           times=times, positions=pos, velocities=vel, accelerations=acc,
-                           has_velocities=has_v, has_accelerations=has_a)
+                           times=times, positions=out_pos, velocities=out_vel,
+                           accelerations=out_acc, has_velocities=has_v, has_accelerations=has_a)
 
 
 def segment_coefficients(T, p0, v0, a0, p1, v1, a1, kind: str) -> np.ndarray:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import matplotlib
 
 matplotlib.use('Agg')
@@ -10,6 +12,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from mixture_ip_ros.core.interaction import trajectory_distribution  # noqa: E402
+from mixture_ip_ros.io.files import write_atomic  # noqa: E402
 
 LABEL_COLORS = {'plate': 'tab:blue', 'screw': 'tab:orange', 'screwdriver': 'tab:green',
                 'left': 'tab:blue', 'right': 'tab:red'}
@@ -20,9 +23,16 @@ def _color(label, i=0):
     return LABEL_COLORS.get(label, f'C{i % 10}')
 
 
-def _save(fig, path):
-    fig.savefig(path, dpi=DPI)
-    plt.close(fig)
+def save_figure(fig, path, dpi=DPI):
+    """Write ``fig`` to ``path`` (format from its suffix) atomically, and close it."""
+    path = Path(path)
+    try:
+        write_atomic(path, lambda f: fig.savefig(f, dpi=dpi, format=path.suffix.lstrip('.')))
+    finally:
+        plt.close(fig)
+
+
+
 
 
 def rms_vs_k(path, candidates, rms, chosen, title, ylabel='RMS error', compared=None):
@@ -49,7 +59,7 @@ def rms_vs_k(path, candidates, rms, chosen, title, ylabel='RMS error', compared=
     ax.set_title(title, fontsize=10)
     ax.legend(fontsize=8, loc='best', framealpha=0.9)
     ax.grid(alpha=0.3)
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def _dof_names(model):
@@ -113,7 +123,7 @@ def box_components_and_posterior(path, model, demos, comp_labels, example, n_joi
     axes[1, 0].set_ylabel('posterior | final wrist')
     fig.suptitle('Box assembly: mixture components (upper) and one leave-one-out posterior '
                  '(lower), thesis Fig. 11', fontsize=10)
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def box_online(path, fractions, correct, err, labels, final_correct, final_err):
@@ -151,7 +161,7 @@ def box_online(path, fractions, correct, err, labels, final_correct, final_err):
                  'squares: from the last wrist sample with the phase known (thesis)', fontsize=9)
     a2.legend(fontsize=8)
     a2.grid(alpha=0.3)
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def hand_error_hist(path, final_err, labels):
@@ -169,7 +179,7 @@ def hand_error_hist(path, final_err, labels):
     ax.set_title('Hand error by FK, leave-one-out (mean +- 2 sd); thesis: plate 3.2 +- 2.6, '
                  'screwdriver 2.1 +- 2.3', fontsize=9)
     ax.grid(alpha=0.3)
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def pole_paths(path, true_paths, single, mixture, K, pole_xy, pole_radius, labels):
@@ -200,7 +210,7 @@ def pole_paths(path, true_paths, single, mixture, K, pole_xy, pole_radius, label
     axes[0].legend(fontsize=8, loc='best')
     fig.suptitle('Pole: predicted flange paths (top view), leave-one-out, thesis Fig. 7',
                  fontsize=10)
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def letter_rms(path_per, path_mean, fractions, R, title):
@@ -213,7 +223,7 @@ def letter_rms(path_per, path_mean, fractions, R, title):
     ax.set_ylabel('RMS error')
     ax.set_title(f'{title}: each test trajectory', fontsize=10)
     ax.grid(alpha=0.3)
-    _save(fig, path_per)
+    save_figure(fig, path_per)
     fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
     m, s = np.nanmean(R, axis=0), np.nanstd(R, axis=0)
     ax.plot(x, m, color='k', label='mean')
@@ -223,7 +233,7 @@ def letter_rms(path_per, path_mean, fractions, R, title):
     ax.set_title(f'{title}: mean and std', fontsize=10)
     ax.legend()
     ax.grid(alpha=0.3)
-    _save(fig, path_mean)
+    save_figure(fig, path_mean)
 
 
 def letter_completion_panels(path, test, snaps, train, true_alpha):
@@ -263,7 +273,7 @@ def letter_completion_panels(path, test, snaps, train, true_alpha):
     axes[3, 0].legend(fontsize=7)
     fig.suptitle('Phase estimation and completion of a test letter (thesis Figs. 16-25)',
                  fontsize=11)
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def alpha_error(path, fractions, A, true_alpha, step):
@@ -282,7 +292,7 @@ def alpha_error(path, fractions, A, true_alpha, step):
     ax.set_title('Phase speed estimate (MAP of 50 samples)', fontsize=10)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def missing_data(path_rms, path_ll, path_recon, fractions, R_em, R_reg, ll, complete, demo, recon):
@@ -299,7 +309,7 @@ def missing_data(path_rms, path_ll, path_recon, fractions, R_em, R_reg, ll, comp
     ax.set_title('Training with missing data: EM vs regression (thesis Fig. 42)', fontsize=10)
     ax.legend()
     ax.grid(alpha=0.3)
-    _save(fig, path_rms)
+    save_figure(fig, path_rms)
 
     fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
     ax.plot(np.arange(1, len(ll) + 1), ll, 'o-', color='k', ms=3)
@@ -307,7 +317,7 @@ def missing_data(path_rms, path_ll, path_recon, fractions, R_em, R_reg, ll, comp
     ax.set_ylabel('log-likelihood of the training data (penalised)')
     ax.set_title('EM learning progress (thesis Fig. 43)', fontsize=10)
     ax.grid(alpha=0.3)
-    _save(fig, path_ll)
+    save_figure(fig, path_ll)
 
     fig, axes = plt.subplots(1, 2, figsize=(9, 4.4), constrained_layout=True)
     for ax, (name, title) in zip(axes, (('regression', 'linear regression (Fig. 36)'),
@@ -323,7 +333,7 @@ def missing_data(path_rms, path_ll, path_recon, fractions, R_em, R_reg, ll, comp
     axes[0].legend(fontsize=8)
     fig.suptitle(f'Training letter {demo.name} with {int(np.isnan(demo.observed[:, 0]).sum())} '
                  'missing samples', fontsize=10)
-    _save(fig, path_recon)
+    save_figure(fig, path_recon)
 
 
 def accuracy_vs_fraction(path, fractions, curves, levels, title, chance=None):
@@ -347,7 +357,7 @@ def accuracy_vs_fraction(path, fractions, curves, levels, title, chance=None):
     ax.set_title(title, fontsize=10)
     ax.legend(fontsize=8, loc='center left', bbox_to_anchor=(1.01, 0.5))
     ax.grid(alpha=0.3)
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def clusters_vs_labels(path, counts, component_names, class_names, title):
@@ -370,7 +380,7 @@ def clusters_vs_labels(path, counts, component_names, class_names, title):
     ax.set_ylabel('component: majority class')
     ax.set_title(title, fontsize=10)
     fig.colorbar(im, ax=ax, shrink=0.8, label='training demonstrations')
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def loglik_vs_k(path, candidates, scores, chosen, title, note=''):
@@ -393,4 +403,4 @@ def loglik_vs_k(path, candidates, scores, chosen, title, note=''):
     ax.set_title('\n'.join([title] + textwrap.wrap(note, 90)), fontsize=9)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
-    _save(fig, path)
+    save_figure(fig, path)

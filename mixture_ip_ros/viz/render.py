@@ -29,6 +29,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 from PIL import Image, ImageDraw, ImageFont  # noqa: E402
 
+from mixture_ip_ros.io.files import write_atomic  # noqa: E402
 from mixture_ip_ros.io.records import InteractionRecord  # noqa: E402
 from mixture_ip_ros.viz import human_model  # noqa: E402
 from mixture_ip_ros.robot.description import load_description  # noqa: E402
@@ -661,7 +662,9 @@ def render_interaction(record: InteractionRecord, out_dir, *, fps: float = 25, w
                 frames.append(Image.fromarray(img).quantize(
                     256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE))
         font = _font(max(11, int(height) // 30))
-    frames[0].save(gif_path, save_all=True, append_images=frames[1:],
-                   duration=max(20, int(round(1000 / fps))), loop=0)
-    _contact_sheet(key_frames, r.replay, font).save(sheet_path)
+    write_atomic(gif_path, lambda f: frames[0].save(
+        f, format='GIF', save_all=True, append_images=frames[1:],
+        duration=max(20, int(round(1000 / fps))), loop=0))
+    sheet = _contact_sheet(key_frames, r.replay, font)
+    write_atomic(sheet_path, lambda f: sheet.save(f, format='PNG'))
     return {'animation': gif_path, 'contact_sheet': sheet_path}
