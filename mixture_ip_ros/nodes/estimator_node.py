@@ -26,7 +26,7 @@ Publishes   trajectory_topic   trajectory_msgs/JointTrajectory, reliable: header
 from dataclasses import dataclass
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped
 from nav_msgs.msg import Path
 import numpy as np
@@ -43,6 +43,7 @@ from mixture_ip_ros.estimation.records import LatencyStats
 from mixture_ip_ros.io.model_file import load_model
 from mixture_ip_ros.nodes import qos
 from mixture_ip_ros.nodes.cdr import JointTrajectoryEncoder, PathEncoder
+from mixture_ip_ros.nodes.diagnostics import OK, WARN, diagnostic_array
 from mixture_ip_ros.nodes.managed import ManagedNode, run_node
 from mixture_ip_ros.nodes.markers import prediction_markers
 from mixture_ip_ros.nodes.params import autostart_param, finite_list, param, positive
@@ -503,22 +504,14 @@ class EstimatorNode(ManagedNode):
         new_rejected = counts.n_rejected - self._diag_seen[0]
         new_failures = counts.plan_failures - self._diag_seen[1]
         self._diag_seen = (counts.n_rejected, counts.plan_failures)
-        status = DiagnosticStatus(name=DIAGNOSTIC_NAME, hardware_id='mixture_ip_ros')
         if new_failures:
-            status.level = DiagnosticStatus.WARN
-            status.message = f'{pl.state}; {new_failures} plans refused'
+            level, message = WARN, f'{pl.state}; {new_failures} plans refused'
         elif new_rejected:
-            status.level = DiagnosticStatus.WARN
-            status.message = f'{pl.state}; {new_rejected} observations rejected'
+            level, message = WARN, f'{pl.state}; {new_rejected} observations rejected'
         else:
-            status.level = DiagnosticStatus.OK
-            status.message = pl.state
-        status.values = [KeyValue(key=k, value='' if v is None else str(v))
-                         for k, v in values.items()]
-        msg = DiagnosticArray()
-        msg.header.stamp = self.get_clock().now().to_msg()
-        msg.status = [status]
-        return msg
+            level, message = OK, pl.state
+        return diagnostic_array(self.get_clock().now().to_msg(), DIAGNOSTIC_NAME, level, message,
+                                values)
 
     # -- logging ------------------------------------------------------------------------
     def _label(self, k) -> str:

@@ -19,7 +19,7 @@ import inspect
 import time
 
 from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped, PoseStamped
 from std_msgs.msg import Header
 
@@ -29,6 +29,7 @@ from mixture_ip_ros.core.stamps import ns_to_parts, stamp_to_ns
 from mixture_ip_ros.estimation.observer import WristObserver
 from mixture_ip_ros.estimation.pose_check import HumanLimits
 from mixture_ip_ros.nodes import qos
+from mixture_ip_ros.nodes.diagnostics import OK, WARN, diagnostic_array
 from mixture_ip_ros.nodes.managed import ManagedNode, run_node
 from mixture_ip_ros.nodes.params import autostart_param, finite_list, param, positive
 from mixture_ip_ros.robot.description import (BASE_FRAME, DEFAULT_ROBOT, load_description,
@@ -274,16 +275,10 @@ class ObserverNode(ManagedNode):
                   **{f'published_{k}': v for k, v in counts.published.items()},
                   'stream_restarts': counts.stream_restarts,
                   'clock_offset_s': self.observer.clock_offset}
-        status = DiagnosticStatus(name='observer_node: mocap', hardware_id='mixture_ip_ros')
-        status.level = DiagnosticStatus.WARN if new else DiagnosticStatus.OK
-        status.message = (f'{new} poses dropped since the last report' if new else
-                          'moving' if self.observer.moving else 'at rest')
-        status.values = [KeyValue(key=k, value='' if v is None else str(v))
-                         for k, v in values.items()]
-        msg = DiagnosticArray()
-        msg.header.stamp = self.get_clock().now().to_msg()
-        msg.status = [status]
-        return msg
+        message = (f'{new} poses dropped since the last report' if new else
+                   'moving' if self.observer.moving else 'at rest')
+        return diagnostic_array(self.get_clock().now().to_msg(), 'observer_node: mocap',
+                                WARN if new else OK, message, values)
 
     def _publish_events(self, events) -> None:
         for kind, stamp_ns in events:

@@ -1,0 +1,16 @@
+"""The one way the nodes report on /diagnostics: one DiagnosticStatus per message."""
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+OK, WARN = DiagnosticStatus.OK, DiagnosticStatus.WARN
+
+
+def diagnostic_array(stamp, name: str, level: bytes, message: str, values: dict):
+    """A DiagnosticArray with one status; ``values`` {key: value} as strings (None as '')."""
+    status = DiagnosticStatus(name=name, hardware_id='mixture_ip_ros', level=level,
+                              message=message)
+    status.values = [KeyValue(key=k, value='' if v is None else str(v))
+                     for k, v in values.items()]
+    msg = DiagnosticArray(status=[status])
+    msg.header.stamp = stamp
+    return msg
