@@ -26,62 +26,101 @@ from .promp import (LOG_2PI, ObservationStats, _regularised_cov, covariance_pena
 
 
 def kmeans(X, n_clusters: int, random_state=0, n_init: int = 10, max_iter: int = 100):
-    """k-means++ seeded Lloyd iterations; the best of ``n_init`` runs. Returns labels (n,)."""
+    """k-means++ seeded Lloyd iterations; the best of ``n_init`` runs (the first of equals).
+    Returns labels (n,).
+
+    Every random draw is in the seeding, so the runs are seeded first, one after another, and
+    their Lloyd iterations then run side by side, each stopping on its own: when its labels
+    repeat (its means are its centres again) or its centres move less than np.allclose's
+    tolerance."""
     X = np.asarray(X, dtype=float)
-    n = len(X)
+    n, dim = X.shape
+    K = int(n_clusters)
+    if K == 1:
+        return np.zeros(n, dtype=int)                    # what every run ends with
     rng = np.random.default_rng(random_state)
-    best, best_inertia = None, np.inf
-    for _ in range(n_init):
-        C = np.empty((n_clusters, X.shape[1]))
-        C[0] = X[rng.integers(n)]
-        d2 = np.sum((X - C[0]) ** 2, axis=1)             # squared distance to the nearest centre
-        for k in range(1, n_clusters):
+    C = np.empty((n_init, K, dim))
+    for r in range(n_init):
+        C[r, 0] = X[rng.integers(n)]
+        d2 = np.sum((X - C[r, 0]) ** 2, axis=1)          # squared distance to the nearest centre
+        for k in range(1, K):
             total = d2.sum()
-            C[k] = X[rng.choice(n, p=d2 / total if total > 0 else np.full(n, 1 / n))]
-            d2 = np.minimum(d2, np.sum((X - C[k]) ** 2, axis=1))
-        labels = None
-        for _ in range(max_iter):
-            new = np.argmin(((X[:, None, :] - C[None]) ** 2).sum(-1), axis=1)
-            if labels is not None and np.array_equal(new, labels):
-                break                  # the same clusters: their means are the centres again
-            labels = new
-            newC = _cluster_means(X, labels, C)
-            if np.all(np.abs(newC - C) <= 1e-8 + 1e-5 * np.abs(C)):      # np.allclose
-                break
-            C = newC
-        inertia = np.sum((X - C[labels]) ** 2)
-        if inertia < best_inertia:
-            best, best_inertia = labels, inertia
-    return best
+            C[r, k] = X[rng.choice(n, p=d2 / total if total > 0 else np.full(n, 1 / n))]
+            d2 = np.minimum(d2, np.sum((X - C[r, k]) ** 2, axis=1))
+    labels = np.full((n_init, n), -1)
+    active = np.arange(n_init)
+    x2 = np.einsum('ij,ij->i', X, X)
+    for _ in range(max_iter):
+        if not active.size:
+            break
+        new = _nearest_centres(X, x2, C[active])
+        moved = ~(new == labels[active]).all(axis=1)
+        active, new = active[moved], new[moved]
+        labels[active] = new
+        newC = _cluster_means(X, new, C[active])
+        still = ~np.all(np.abs(newC - C[active]) <= 1e-8 + 1e-5 * np.abs(C[active]), axis=(1, 2))
+        C[active[still]] = newC[still]
+        active = active[still]
+    inertia = [np.sum((X - C[r][labels[r]]) ** 2) for r in range(n_init)]
+    return labels[int(np.argmin(inertia))]
+
+
+def _nearest_centres(X, x2, C):
+    """argmin_k ((x_i - c_rk) ** 2).sum() for every run r and row i (C (runs, K, dim)), the
+    index exactly that sum picks. The distances are first expanded as |x|^2 + |c|^2 - 2 x.c
+    (one matrix product); a row whose nearest two are closer than 1e-9 (|x|^2 + |c|^2), far
+    above what rounding can move either form (~d eps of it), is decided by the direct sum."""
+    c2 = np.einsum('rkd,rkd->rk', C, C)
+    dist = x2[None, :, None] + c2[:, None, :] - 2 * (X @ C.transpose(0, 2, 1))   # (runs, n, K)
+    labels = np.argmin(dist, axis=2)
+    if C.shape[1] > 1:
+        two = np.partition(dist, 1, axis=2)
+        scale = x2[None, :] + c2.max(axis=1)[:, None]
+        for r, i in zip(*np.nonzero(two[..., 1] - two[..., 0] <= 1e-9 * scale)):
+            labels[r, i] = np.argmin(((X[i] - C[r]) ** 2).sum(-1))
+    return labels
 
 
 def _cluster_means(X, labels, C):
-    """Mean of every cluster's rows (rows summed in order, as X[labels == k].mean(0)); an empty
-    cluster keeps its centre C[k]."""
-    order = np.argsort(labels, kind='stable')
-    counts = np.bincount(labels, minlength=len(C))
+    """Every run's cluster means (labels (runs, n), centres C (runs, K, dim)), the rows of a
+    cluster summed in order as X[labels == k].mean(0) sums them; an empty cluster keeps its
+    centre."""
+    runs, K, dim = C.shape
+    keys = (np.arange(runs)[:, None] * K + labels).ravel()
+    order = np.argsort(keys, kind='stable')
+    counts = np.bincount(keys, minlength=runs * K)
     present = np.flatnonzero(counts)
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])[present]
-    out = C.copy()
-    out[present] = np.add.reduceat(X[order], starts, axis=0) / counts[present, None]
-    return out
+    out = C.reshape(runs * K, dim).copy()
+    out[present] = (np.add.reduceat(X[order % len(X)], starts, axis=0)
+                    / counts[present, None])
+    return out.reshape(runs, K, dim)
 
 
 def gmm_log_prob(W, weights, means, covs):
     """log(alpha_k N(w_i; mu_k, Sigma_k)) for every i, k: the terms of eqs. 6-7."""
-    return _gmm_log_prob(W, weights, means, [linalg.cho_factor(c, lower=True) for c in covs])
+    return _gmm_log_prob(W, weights, means, [linalg.cho_factor(c, lower=True) for c in covs])[0]
 
 
 def _gmm_log_prob(W, weights, means, chols):
-    """:func:`gmm_log_prob` with the covariances' lower Cholesky factors (cho_factor)."""
+    """:func:`gmm_log_prob` with the covariances' lower Cholesky factors (cho_factor), and the
+    squared Mahalanobis distances (w_i - mu_k)^T Sigma_k^-1 (w_i - mu_k) it adds up (n, K)."""
     n, d = W.shape
     out = np.empty((n, len(weights)))
+    maha = np.empty((n, len(weights)))
     for k in range(len(weights)):
         L = chols[k][0]
-        sol = linalg.solve_triangular(L, (W - means[k]).T, lower=True)
+        sol = linalg.solve_triangular(L, (W - means[k]).T, lower=True, check_finite=False)
+        maha[:, k] = np.sum(sol ** 2, axis=0)
         out[:, k] = (np.log(weights[k]) - 0.5 * (d * LOG_2PI + 2 * np.sum(np.log(np.diag(L)))
-                                                 + np.sum(sol ** 2, axis=0)))
-    return out
+                                                 + maha[:, k]))
+    return out, maha
+
+
+def _logsumexp_rows(lp):
+    """log sum_k exp(lp_ik) per row i, shifted by the row's maximum (finite rows)."""
+    top = lp.max(axis=1)
+    return top + np.log(np.exp(lp - top[:, None]).sum(axis=1))
 
 
 def gmm_responsibilities(W, weights, means, covs):
@@ -287,21 +326,24 @@ class MixtureIProMP:
         self.converged_ = False
         for it in range(self.max_iter):
             lp_alpha = alpha_log_density(alphas, a_mean, a_var)
-            chols = [linalg.cho_factor(c, lower=True) for c in covs]
+            chols = [linalg.cho_factor(c, lower=True, check_finite=False) for c in covs]
             new_resp = resp
             if self.method == 'regression':
-                lp = _gmm_log_prob(W, weights, means, chols) + lp_alpha               # eq. 7
+                lp, maha = _gmm_log_prob(W, weights, means, chols)
+                lp += lp_alpha                                                         # eq. 7
                 if labels is None:
-                    norm = logsumexp(lp, axis=1)
+                    norm = _logsumexp_rows(lp)
                     new_resp, ll = np.exp(lp - norm[:, None]), float(norm.sum())
                 else:
                     ll = float(np.sum(resp * lp))
                 post_means, post_covs = W, None
+                ll += self._covariance_penalty_of_m_step(chols, resp, maha, d)
             else:
                 new_resp, ll, post_means, post_covs = self._latent_e_step(
                     stats, weights, means, covs, noise, lp_alpha,
                     resp if labels is not None else None)
-            ll += sum(covariance_penalty(c, self.prior_cov_, self.prior_strength) for c in chols)
+                ll += sum(covariance_penalty(c, self.prior_cov_, self.prior_strength)
+                          for c in chols)
             ll += alpha_penalty(a_var, self.alpha_prior_var_, self.prior_strength)
             self.log_likelihood_.append(ll)
             if ll - prev < self.tol * max(1.0, abs(ll)):
@@ -348,6 +390,20 @@ class MixtureIProMP:
         if on.ndim > 1 or not np.all(np.isfinite(on) & (on >= 0)):
             raise ValueError('observation_noise must be a number or one number per observed DOF, '
                              f'each >= 0 (in the DOF\'s unit), got {self.observation_noise!r}')
+
+    def _covariance_penalty_of_m_step(self, chols, resp, maha, d):
+        """The covariance priors' log density (promp.covariance_penalty summed over k) at
+        covariances that the M step (eq. 10) made from ``resp``, without inverting them:
+        Sigma_k = (S_k + s Omega) / (n_k + s) with S_k = sum_i r_ik e_ik e_ik^T gives
+        tr(Omega Sigma_k^-1) = ((n_k + s) d - sum_i r_ik e_ik^T Sigma_k^-1 e_ik) / s, and the
+        E step has just computed those squared Mahalanobis distances (``maha``)."""
+        s = self.prior_strength
+        if s == 0:
+            return 0.0
+        nk = resp.sum(axis=0) + 10 * np.finfo(float).eps                 # as gmm_maximization
+        trace = ((nk + s) * d - np.einsum('ik,ik->k', resp, maha)) / s
+        logdet = np.array([2 * np.sum(np.log(np.diag(c[0]))) for c in chols])
+        return float(-0.5 * s * np.sum(trace + logdet))
 
     def _ridge_weights(self, st):
         """Eq. 14 per DOF (ridge); for EM only a starting point (more ridge where data is thin)."""
@@ -457,9 +513,8 @@ class MixtureIProMP:
         lp = np.log(self.weights_) + alpha_log_density(alphas, self.alpha_mean_,
                                                        self.alpha_std_ ** 2)
         for k in range(self.n_components):
-            lp[:, k] += log_evidence(stats, self.means_[k],
-                                     linalg.cho_factor(self.covariances_[k], lower=True), noise[k])
-        return logsumexp(lp, axis=1)
+            lp[:, k] += log_evidence(stats, self.means_[k], self.covariances_[k], noise[k])
+        return _logsumexp_rows(lp)
 
     # --------------------------------------------------------- weight vectors (eqs. 6-7)
     def demonstration_weights(self, demonstrations):

@@ -70,8 +70,10 @@ def cho_inverse(cov_chol) -> np.ndarray:
     inv, info = linalg.lapack.dpotri(cov_chol[0], lower=1)
     if info != 0:
         raise np.linalg.LinAlgError(f'potri failed (info {info}): the factor is singular')
-    low = np.tril(inv, -1)
-    return np.tril(inv) + low.T
+    low = np.tril(inv)
+    full = low + low.T
+    full.flat[::len(full) + 1] *= 0.5                               # the diagonal counted twice
+    return full
 
 
 def block_diag_info(stats: ObservationStats, noise_var: np.ndarray):
@@ -117,30 +119,38 @@ def stack_stats(stats) -> ObservationStats:
                               for f in ('G', 'b', 'yy', 'm')))
 
 
-def log_evidence(stats: ObservationStats, mean, cov_chol, noise_var) -> np.ndarray:
+def log_evidence(stats: ObservationStats, mean, cov, noise_var) -> np.ndarray:
     """Eq. 21, log p(D_i) = log N(y_i; A_i mu, R + A_i Sigma A_i^T), of every trajectory in
-    ``stats`` (stacked, :func:`stack_stats`) under one weight Gaussian N(mean, Sigma); the
-    marginal likelihood of :func:`weight_posterior` for many trajectories at once, in weight
-    space: log|Sigma| + log|Sigma^-1 + A^T R^-1 A| and the quadratic form of the information
-    vector, one batched Cholesky factorisation. ``cov_chol`` as in weight_posterior; noise
-    variances per DOF. Returns (n,)."""
+    ``stats`` (stacked, :func:`stack_stats`) under one weight Gaussian N(mean, Sigma = ``cov``)
+    and per-DOF noise variances: the marginal likelihood of :func:`weight_posterior` for many
+    trajectories at once, in weight space, log|Sigma| + log|P_i| and the quadratic form
+    eta_i^T P_i^-1 eta_i of the information eta_i = A^T R^-1 (y_i - A mu), where
+    P_i = Sigma^-1 + A^T R^-1 A. One batched Cholesky factorisation gives both: of P_i bordered
+    by eta_i, [[P_i, eta_i], [eta_i^T, c_i]], whose last row is (L_i^-1 eta_i)^T; c_i only keeps
+    the last pivot positive (c_i > eta_i^T P_i^-1 eta_i, which is below eta_i^T Sigma eta_i as
+    P_i >= Sigma^-1). Returns (n,)."""
     G, b, yy, m = stats.G, stats.b, stats.yy, stats.m
     n, D, N = b.shape
     d = D * N
+    cov = np.asarray(cov, dtype=float)
     noise_var = np.broadcast_to(np.asarray(noise_var, dtype=float), (D,))
-    prec = np.empty((n, d, d))
-    prec[:] = cho_inverse(cov_chol)
-    for j in range(D):
-        prec[:, j * N:(j + 1) * N, j * N:(j + 1) * N] += G[:, j] / noise_var[j]
+    chol = linalg.cho_factor(cov, lower=True, check_finite=False)
     mu = np.asarray(mean, dtype=float).reshape(D, N)
-    Gmu = np.einsum('ijab,jb->ija', G, mu)                        # A_j^T A_j mu_j
-    innov = ((b - Gmu) / noise_var[:, None]).reshape(n, d)         # A^T R^-1 (y - A mu)
+    Gmu = (G @ mu[:, :, None])[..., 0]                             # A_j^T A_j mu_j
+    eta = ((b - Gmu) / noise_var[:, None]).reshape(n, d)           # A^T R^-1 (y - A mu)
     rr = ((yy - 2 * np.einsum('jn,ijn->ij', mu, b) + np.einsum('jn,ijn->ij', mu, Gmu))
           / noise_var).sum(axis=1)                                 # (y - A mu)^T R^-1 (y - A mu)
-    L = np.linalg.cholesky(prec)
-    u = linalg.solve_triangular(L, innov[..., None], lower=True)[..., 0]
-    logdet_prec = 2 * np.log(np.diagonal(L, axis1=1, axis2=2)).sum(axis=1)
-    logdet_prior = 2 * np.sum(np.log(np.diag(cov_chol[0])))
+    P = np.empty((n, d + 1, d + 1))
+    P[:, :d, :d] = cho_inverse(chol)
+    for j in range(D):
+        P[:, j * N:(j + 1) * N, j * N:(j + 1) * N] += G[:, j] / noise_var[j]
+    P[:, d, :d] = eta
+    P[:, :d, d] = eta
+    P[:, d, d] = 2 * np.sum((eta @ cov) * eta, axis=1) + 1.0
+    L = np.linalg.cholesky(P)
+    u = L[:, d, :d]                                                # L_i^-1 eta_i
+    logdet_prec = 2 * np.log(np.diagonal(L[:, :d, :d], axis1=1, axis2=2)).sum(axis=1)
+    logdet_prior = 2 * np.sum(np.log(np.diag(chol[0])))
     return -0.5 * (m.sum(axis=1) * LOG_2PI + (m * np.log(noise_var)).sum(axis=1)
                    + logdet_prior + logdet_prec + rr - np.einsum('ij,ij->i', u, u))
 
