@@ -273,6 +273,10 @@ def _reading(path: Path):
         reader.close()
 
 
+# libyaml's safe loader where PyYAML was built with it (the same documents, parsed in C).
+_YAML_LOADER = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)
+
+
 def bag_custom_data(path) -> dict:
     """The ``custom_data`` map of a bag directory's metadata.yaml ({} if none)."""
     path = Path(path)
@@ -280,7 +284,7 @@ def bag_custom_data(path) -> dict:
     if not meta.is_file():
         return {}
     try:
-        info = yaml.safe_load(meta.read_text())['rosbag2_bagfile_information']
+        info = yaml.load(meta.read_text(), Loader=_YAML_LOADER)['rosbag2_bagfile_information']
     except Exception as exc:
         raise BagError(path, f'unreadable metadata.yaml: {exc}') from exc
     custom = info.get('custom_data') or {}
