@@ -147,9 +147,14 @@ def log_evidence(stats: ObservationStats, mean, cov, noise_var) -> np.ndarray:
     P[:, d, :d] = eta
     P[:, :d, d] = eta
     P[:, d, d] = 2 * np.sum((eta @ cov) * eta, axis=1) + 1.0
-    L = np.linalg.cholesky(P)
-    u = L[:, d, :d]                                                # L_i^-1 eta_i
-    logdet_prec = 2 * np.log(np.diagonal(L[:, :d, :d], axis1=1, axis2=2)).sum(axis=1)
+    for Pi in P:
+        # LAPACK factors P_i in place: P_i^T is P_i in Fortran order, whose lower factor L_i
+        # is then the upper triangle of P_i (row-major): L_i[d, :d] is the column P_i[:d, d].
+        info = linalg.lapack.dpotrf(Pi.T, lower=1, overwrite_a=1, clean=0)[1]
+        if info != 0:
+            raise np.linalg.LinAlgError('the posterior precision is not positive definite')
+    u = P[:, :d, d]                                                # L_i^-1 eta_i
+    logdet_prec = 2 * np.log(np.diagonal(P[:, :d, :d], axis1=1, axis2=2)).sum(axis=1)
     logdet_prior = 2 * np.sum(np.log(np.diag(chol[0])))
     return -0.5 * (m.sum(axis=1) * LOG_2PI + (m * np.log(noise_var)).sum(axis=1)
                    + logdet_prior + logdet_prec + rr - np.einsum('ij,ij->i', u, u))
