@@ -343,3 +343,65 @@ def test_read_messages_in_time_order(tmp_path):
     assert {m.topic for m in read_messages(bag, topics=['/joint_states'])} == {'/joint_states'}
     with pytest.raises(BagError, match="not in bag"):
         read_messages(bag, topics=['/nope'])
+
+
+def _joint_msg(ns, names, pos, vel, frame=''):
+    ts = typestore()
+    T = ts.types
+    return ts.serialize_cdr(T['sensor_msgs/msg/JointState'](
+        header=T['std_msgs/msg/Header'](stamp=T['builtin_interfaces/msg/Time'](
+            sec=ns // 10**9, nanosec=ns % 10**9), frame_id=frame),
+        name=list(names), position=np.asarray(pos, dtype=float),
+        velocity=np.asarray(vel, dtype=float), effort=np.zeros(0)), 'sensor_msgs/msg/JointState')
+
+
+def _decoded_by_rosbags(bag, joint_names=JOINT_NAMES):
+    """The streams decoded message by message with rosbags (the reference of read_bag): stamps
+    (ns) and values of each, in stamp order."""
+    ts = typestore()
+    wrist, joints = {}, {}
+    for m in read_messages(bag):
+        msg = ts.deserialize_cdr(m.data, m.msgtype)
+        ns = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec or m.log_time_ns
+        if m.topic == '/mocap/wrist':
+            p, q = msg.pose.position, msg.pose.orientation
+            wrist[ns] = (p.x, p.y, p.z, q.x, q.y, q.z, q.w)
+        else:
+            names = list(msg.name)
+            joints[ns] = [msg.position[names.index(n)] for n in joint_names]
+    return ((np.array(sorted(wrist)), np.array([wrist[k] for k in sorted(wrist)])),
+            (np.array(sorted(joints)), np.array([joints[k] for k in sorted(joints)])))
+
+
+@pytest.mark.parametrize('layout', ['uniform', 'names_change', 'velocity_sometimes',
+                                    'zero_stamps'])
+def test_streams_read_as_one_array_equal_the_message_by_message_decode(tmp_path, layout,
+                                                                      monkeypatch):
+    """read_bag reads a stream whose messages share one layout as one array, and any other
+    message by message: both give what rosbags decodes from each message."""
+    from mixture_ip_ros.io import bags
+    if layout in ('uniform', 'zero_stamps'):            # no message decoded one by one
+        monkeypatch.setattr(bags, '_deserialize', None)
+    rng = np.random.default_rng(9)
+    ns = [DEFAULT_START_TIME_NS + k * 10**7 for k in range(1, 41)]
+    gripper = list(JOINT_NAMES) + ['gripper']
+    poses, joints = [], []
+    for i, n in enumerate(ns):
+        stamp = 0 if layout == 'zero_stamps' and i % 3 == 0 else n
+        poses.append((n, _pose_cdr(stamp, x=float(rng.normal()))))
+        names = gripper[::-1] if layout == 'names_change' and i >= 20 else gripper
+        vel = (rng.normal(size=8) if layout != 'velocity_sometimes' or i % 2 else [])
+        joints.append((n, _joint_msg(stamp, names, rng.normal(size=8), vel, frame='base')))
+    bag = _raw_bag(tmp_path / 'b', [('/mocap/wrist', 'geometry_msgs/msg/PoseStamped', poses),
+                                    ('/joint_states', 'sensor_msgs/msg/JointState', joints)])
+    rec = read_bag(bag)
+    (w_ns, wrist), (j_ns, joint) = _decoded_by_rosbags(bag)
+    assert rec.start_time_ns == min(w_ns[0], j_ns[0]) and rec.wrist_frame == 'world'
+    np.testing.assert_array_equal(rec.start_time_ns + np.round(rec.wrist_t * 1e9).astype(int),
+                                  w_ns)
+    np.testing.assert_array_equal(rec.start_time_ns + np.round(rec.joint_t * 1e9).astype(int),
+                                  j_ns)
+    np.testing.assert_array_equal(rec.wrist_xyz, wrist[:, :3])
+    np.testing.assert_array_equal(rec.wrist_quat, wrist[:, 3:])
+    np.testing.assert_array_equal(rec.joint_q, joint)
+    assert (rec.joint_qd is None) == (layout == 'velocity_sometimes')

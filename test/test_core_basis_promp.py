@@ -5,7 +5,8 @@ import pytest
 from scipy.stats import multivariate_normal
 
 from mixture_ip_ros.core.basis import GaussianBasis
-from mixture_ip_ros.core.promp import (ProMP, observation_stats, ridge_weights,
+from mixture_ip_ros.core.promp import (ObservationStats, ProMP, cho_inverse, log_evidence,
+                                       observation_stats, ridge_weights, stack_stats,
                                        weight_posterior)
 from scipy import linalg
 
@@ -73,6 +74,46 @@ def test_marginal_likelihood_matches_dense_gaussian():
     K = cov @ A.T @ np.linalg.inv(S)
     assert np.allclose(post_mean, mean + K @ (y - A @ mean), atol=1e-8)
     assert np.allclose(post_cov, cov - K @ A @ cov, atol=1e-8)
+
+
+def test_observation_stats_are_the_per_dof_sums_over_observed_samples():
+    rng = np.random.default_rng(3)
+    b = GaussianBasis(5)
+    z = np.sort(rng.uniform(0, 1, 40))
+    Y = rng.standard_normal((40, 4))
+    Y[5:12, :2] = np.nan                # two DOFs missing together, one alone, one complete
+    Y[20:23, 2] = np.nan
+    st = observation_stats(b, z, Y)
+    for j in range(4):
+        rows = ~np.isnan(Y[:, j])
+        A = b(z[rows])
+        assert np.allclose(st.G[j], A.T @ A, rtol=1e-13, atol=1e-15)
+        assert np.allclose(st.b[j], A.T @ Y[rows, j], rtol=1e-13, atol=1e-15)
+        assert st.yy[j] == pytest.approx(Y[rows, j] @ Y[rows, j], rel=1e-13)
+        assert st.m[j] == rows.sum()
+
+
+def test_batched_log_evidence_is_the_marginal_likelihood_of_every_trajectory():
+    """promp.log_evidence (one bordered Cholesky per trajectory) vs weight_posterior's eq. 21,
+    with missing samples, per-DOF noise and trajectories of different lengths."""
+    rng = np.random.default_rng(4)
+    b = GaussianBasis(6)
+    D, N = 3, 6
+    mean = rng.standard_normal(D * N)
+    cov = random_spd(rng, D * N)
+    noise = np.array([0.05, 0.2, 0.01])
+    stats = []
+    for i in range(7):
+        T = int(rng.integers(8, 60))
+        Y = rng.standard_normal((T, D)) * 3
+        Y[:T // 3, i % D] = np.nan
+        stats.append(observation_stats(b, np.sort(rng.uniform(0, 1, T)), Y))
+    chol = linalg.cho_factor(cov, lower=True)
+    want = [weight_posterior(st, mean, chol, noise)[2] for st in stats]
+    assert np.allclose(log_evidence(stack_stats(stats), mean, cov, noise), want, rtol=1e-10)
+    assert np.allclose(cho_inverse(chol), np.linalg.inv(cov), rtol=1e-9, atol=1e-12)
+    one = stack_stats(stats[:1])
+    assert isinstance(one, ObservationStats) and one.G.shape == (1, D, N, N)
 
 
 def _sample_set(rng, n, b, mean, cov, D, noise):

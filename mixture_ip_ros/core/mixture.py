@@ -8,6 +8,9 @@ use each demonstration's marginal likelihood p(D_i | k) and the M step adds the 
 posterior covariances (eqs. 27-30 per component).
 """
 
+import inspect
+from typing import NamedTuple
+
 import numpy as np
 from scipy import linalg
 from scipy.special import logsumexp
@@ -17,44 +20,107 @@ from .demonstration import Demonstration
 from .interaction import condition_on_observed, trajectory_distribution
 from .phase import (alpha_log_density, alpha_m_step, alpha_penalty, alpha_prior_std,
                     timing_variance)
-from .promp import (LOG_2PI, _regularised_cov, covariance_penalty, expected_sq_residual,
-                    observation_stats, weight_posterior)
+from .promp import (LOG_2PI, ObservationStats, _regularised_cov, covariance_penalty,
+                    expected_sq_residual, log_evidence, observation_stats, stack_stats,
+                    weight_posterior)
 
 
 def kmeans(X, n_clusters: int, random_state=0, n_init: int = 10, max_iter: int = 100):
-    """k-means++ seeded Lloyd iterations; the best of ``n_init`` runs. Returns labels (n,)."""
+    """k-means++ seeded Lloyd iterations; the best of ``n_init`` runs (the first of equals).
+    Returns labels (n,).
+
+    Every random draw is in the seeding, so the runs are seeded first, one after another, and
+    their Lloyd iterations then run side by side, each stopping on its own: when its labels
+    repeat (its means are its centres again) or its centres move less than np.allclose's
+    tolerance."""
+    X = np.asarray(X, dtype=float)
+    n, dim = X.shape
+    K = int(n_clusters)
+    if K == 1:
+        return np.zeros(n, dtype=int)                    # what every run ends with
     rng = np.random.default_rng(random_state)
-    best, best_inertia = None, np.inf
-    for _ in range(n_init):
-        centers = [X[rng.integers(len(X))]]
-        for _ in range(1, n_clusters):
-            d2 = np.min([np.sum((X - c) ** 2, axis=1) for c in centers], axis=0)
-            p = d2 / d2.sum() if d2.sum() > 0 else np.full(len(X), 1 / len(X))
-            centers.append(X[rng.choice(len(X), p=p)])
-        C = np.array(centers)
-        for _ in range(max_iter):
-            labels = np.argmin(((X[:, None, :] - C[None]) ** 2).sum(-1), axis=1)
-            newC = np.array([X[labels == k].mean(0) if np.any(labels == k) else C[k]
-                             for k in range(n_clusters)])
-            if np.allclose(newC, C):
-                break
-            C = newC
-        inertia = np.sum((X - C[labels]) ** 2)
-        if inertia < best_inertia:
-            best, best_inertia = labels, inertia
-    return best
+    C = np.empty((n_init, K, dim))
+    for r in range(n_init):
+        C[r, 0] = X[rng.integers(n)]
+        d2 = np.sum((X - C[r, 0]) ** 2, axis=1)          # squared distance to the nearest centre
+        for k in range(1, K):
+            total = d2.sum()
+            C[r, k] = X[rng.choice(n, p=d2 / total if total > 0 else np.full(n, 1 / n))]
+            d2 = np.minimum(d2, np.sum((X - C[r, k]) ** 2, axis=1))
+    labels = np.full((n_init, n), -1)
+    active = np.arange(n_init)
+    x2 = np.einsum('ij,ij->i', X, X)
+    for _ in range(max_iter):
+        if not active.size:
+            break
+        new = _nearest_centres(X, x2, C[active])
+        moved = ~(new == labels[active]).all(axis=1)
+        active, new = active[moved], new[moved]
+        labels[active] = new
+        newC = _cluster_means(X, new, C[active])
+        still = ~np.all(np.abs(newC - C[active]) <= 1e-8 + 1e-5 * np.abs(C[active]), axis=(1, 2))
+        C[active[still]] = newC[still]
+        active = active[still]
+    inertia = [np.sum((X - C[r][labels[r]]) ** 2) for r in range(n_init)]
+    return labels[int(np.argmin(inertia))]
+
+
+def _nearest_centres(X, x2, C):
+    """argmin_k ((x_i - c_rk) ** 2).sum() for every run r and row i (C (runs, K, dim)), the
+    index exactly that sum picks. The distances are first expanded as |x|^2 + |c|^2 - 2 x.c
+    (one matrix product); a row whose nearest two are closer than 1e-9 (|x|^2 + |c|^2), far
+    above what rounding can move either form (~d eps of it), is decided by the direct sum."""
+    c2 = np.einsum('rkd,rkd->rk', C, C)
+    dist = x2[None, :, None] + c2[:, None, :] - 2 * (X @ C.transpose(0, 2, 1))   # (runs, n, K)
+    labels = np.argmin(dist, axis=2)
+    if C.shape[1] > 1:
+        two = np.partition(dist, 1, axis=2)
+        scale = x2[None, :] + c2.max(axis=1)[:, None]
+        for r, i in zip(*np.nonzero(two[..., 1] - two[..., 0] <= 1e-9 * scale)):
+            labels[r, i] = np.argmin(((X[i] - C[r]) ** 2).sum(-1))
+    return labels
+
+
+def _cluster_means(X, labels, C):
+    """Every run's cluster means (labels (runs, n), centres C (runs, K, dim)), the rows of a
+    cluster summed in order as X[labels == k].mean(0) sums them; an empty cluster keeps its
+    centre."""
+    runs, K, dim = C.shape
+    keys = (np.arange(runs)[:, None] * K + labels).ravel()
+    order = np.argsort(keys, kind='stable')
+    counts = np.bincount(keys, minlength=runs * K)
+    present = np.flatnonzero(counts)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])[present]
+    out = C.reshape(runs * K, dim).copy()
+    out[present] = (np.add.reduceat(X[order % len(X)], starts, axis=0)
+                    / counts[present, None])
+    return out.reshape(runs, K, dim)
 
 
 def gmm_log_prob(W, weights, means, covs):
     """log(alpha_k N(w_i; mu_k, Sigma_k)) for every i, k: the terms of eqs. 6-7."""
+    return _gmm_log_prob(W, weights, means, [linalg.cho_factor(c, lower=True) for c in covs])[0]
+
+
+def _gmm_log_prob(W, weights, means, chols):
+    """:func:`gmm_log_prob` with the covariances' lower Cholesky factors (cho_factor), and the
+    squared Mahalanobis distances (w_i - mu_k)^T Sigma_k^-1 (w_i - mu_k) it adds up (n, K)."""
     n, d = W.shape
     out = np.empty((n, len(weights)))
+    maha = np.empty((n, len(weights)))
     for k in range(len(weights)):
-        L = np.linalg.cholesky(covs[k])
-        sol = linalg.solve_triangular(L, (W - means[k]).T, lower=True)
+        L = chols[k][0]
+        sol = linalg.solve_triangular(L, (W - means[k]).T, lower=True, check_finite=False)
+        maha[:, k] = np.sum(sol ** 2, axis=0)
         out[:, k] = (np.log(weights[k]) - 0.5 * (d * LOG_2PI + 2 * np.sum(np.log(np.diag(L)))
-                                                 + np.sum(sol ** 2, axis=0)))
-    return out
+                                                 + maha[:, k]))
+    return out, maha
+
+
+def _logsumexp_rows(lp):
+    """log sum_k exp(lp_ik) per row i, shifted by the row's maximum (finite rows)."""
+    top = lp.max(axis=1)
+    return top + np.log(np.exp(lp - top[:, None]).sum(axis=1))
 
 
 def gmm_responsibilities(W, weights, means, covs):
@@ -71,8 +137,12 @@ def gmm_maximization(W, resp, prior_cov, prior_strength, extra_cov=None):
     nk = resp.sum(axis=0) + 10 * np.finfo(float).eps                     # eq. 8
     weights = nk / n
     K = resp.shape[1]
-    Wk = W if W.ndim == 3 else np.broadcast_to(W[:, None, :], (n, K, W.shape[-1]))
-    means = np.einsum('ik,ikd->kd', resp, Wk) / nk[:, None]                # eq. 9
+    if W.ndim == 2:
+        means = resp.T @ W / nk[:, None]                                    # eq. 9
+        Wk = np.broadcast_to(W[:, None, :], (n, K, W.shape[-1]))
+    else:
+        means = np.einsum('ik,ikd->kd', resp, W) / nk[:, None]
+        Wk = W
     covs = np.empty((K, means.shape[1], means.shape[1]))
     for k in range(K):
         E = Wk[:, k] - means[k]
@@ -81,6 +151,26 @@ def gmm_maximization(W, resp, prior_cov, prior_strength, extra_cov=None):
             S += np.einsum('i,ide->de', resp[:, k], extra_cov[:, k])
         covs[k] = _regularised_cov(S, nk[k], np.asarray(prior_cov), prior_strength)
     return weights, means, covs
+
+
+class _Prepared(NamedTuple):
+    """What a fit needs of each demonstration on its own, whatever the other demonstrations it
+    is fitted with: the observation statistics (stacked, promp.stack_stats), the eq. 14
+    weights W (n, d), the squared residuals at them (n, D), alpha = 1/T and the timing variance
+    (n,). Cross-validation computes them once and every fold and K indexes them."""
+
+    stats: ObservationStats
+    W: np.ndarray
+    sq: np.ndarray
+    alphas: np.ndarray
+    timing: np.ndarray
+    n_observed: int
+
+    def take(self, idx) -> '_Prepared':
+        st = self.stats
+        return _Prepared(ObservationStats(st.G[idx], st.b[idx], st.yy[idx], st.m[idx]),
+                         self.W[idx], self.sq[idx], self.alphas[idx], self.timing[idx],
+                         self.n_observed)
 
 
 class MixtureIProMP:
@@ -145,37 +235,61 @@ class MixtureIProMP:
         """
         demos = _validate_demonstrations(demonstrations, self.n_components)
         self._check_params()
-        self.basis_ = GaussianBasis(self.n_basis)
-        self.n_observed_ = demos[0].n_observed_dofs
-        self.n_controlled_ = demos[0].n_controlled_dofs
-        D = self.n_observed_ + self.n_controlled_
-        fixed_noise = None
-        if self.noise_var is not None:
-            fixed_noise = np.broadcast_to(np.asarray(self.noise_var, dtype=float), (D,)).copy()
-            if not np.all(np.isfinite(fixed_noise) & (fixed_noise > 0)):
-                raise ValueError(f'noise_var must be positive and finite, got {self.noise_var!r}')
-        stats = [observation_stats(self.basis_, demo.phase,
-                                   np.hstack([demo.observed, demo.controlled])) for demo in demos]
+        return self._fit_prepared(self._prepare(demos), labels)
+
+    def _prepare(self, demos) -> '_Prepared':
+        """What a fit needs of each demonstration on its own (see _Prepared)."""
+        basis = GaussianBasis(self.n_basis)
+        stats = [observation_stats(basis, demo.phase, np.hstack([demo.observed, demo.controlled]))
+                 for demo in demos]
         if self.method == 'regression':
             for demo, st in zip(demos, stats):
                 if np.any(st.m < 1):
                     raise ValueError(f'demonstration {demo.name!r} has a DOF never observed; '
                                      "use method='em' for missing data")
         W = np.array([self._ridge_weights(st) for st in stats])
-        n, d = W.shape
+        zero = np.zeros((W.shape[1], W.shape[1]))
+        sq = np.array([expected_sq_residual(st, w, zero) for st, w in zip(stats, W)])  # (n, D)
+        return _Prepared(stack_stats(stats), W, sq,
+                         np.array([1.0 / demo.duration for demo in demos]),
+                         timing_variance([demo.duration for demo in demos],
+                                         [float(np.median(np.diff(demo.t))) for demo in demos]),
+                         demos[0].n_observed_dofs)
+
+    def _initial_clusters(self, data: '_Prepared'):
+        """k-means of the standardised weights and phase speeds: EM's start (eq. 7's r_ik)."""
+        W, alphas = data.W, data.alphas
+        w_var = np.maximum(W.var(axis=0), 1e-12)
+        a_scale = np.sqrt(max(alphas.var(), data.timing.mean(), 1e-24))
+        return kmeans(np.column_stack([W / np.sqrt(w_var), alphas / a_scale]), self.n_components,
+                      random_state=self.random_state, n_init=self.n_init)
+
+    def _fit_prepared(self, data: '_Prepared', labels=None, init=None):
+        """:meth:`fit` from prepared demonstrations; ``init``: the k-means start
+        (:meth:`_initial_clusters` of ``data``) if the caller has it already."""
+        self._check_params()
+        n, d = data.W.shape
         K = self.n_components
+        if n < K:
+            raise ValueError(f'{n} demonstrations are fewer than n_components={K}')
+        self.basis_ = GaussianBasis(self.n_basis)
+        self.n_observed_ = data.n_observed
+        D = data.sq.shape[1]
+        self.n_controlled_ = D - data.n_observed
+        fixed_noise = None
+        if self.noise_var is not None:
+            fixed_noise = np.broadcast_to(np.asarray(self.noise_var, dtype=float), (D,)).copy()
+            if not np.all(np.isfinite(fixed_noise) & (fixed_noise > 0)):
+                raise ValueError(f'noise_var must be positive and finite, got {self.noise_var!r}')
+        W, alphas, timing, sq = data.W, data.alphas, data.timing, data.sq
+        m = data.stats.m                                                              # (n, D)
         # A component is a joint p(w, alpha | k) = p(w | k) p(alpha | k) over shape and phase
         # speed alpha = 1/T (eq. 17's independence of w and alpha within a pattern): patterns
         # that differ in speed are told apart by it, and p(alpha | k) is the online prior.
-        alphas = np.array([1.0 / demo.duration for demo in demos])
-        timing = timing_variance([demo.duration for demo in demos],
-                                 [float(np.median(np.diff(demo.t))) for demo in demos])
         w_var = np.maximum(W.var(axis=0), 1e-12)
         if labels is None:
             self.classes_ = None
-            a_scale = np.sqrt(max(alphas.var(), timing.mean(), 1e-24))
-            init = kmeans(np.column_stack([W / np.sqrt(w_var), alphas / a_scale]), K,
-                          random_state=self.random_state, n_init=self.n_init)
+            init = self._initial_clusters(data) if init is None else np.asarray(init)
         else:
             self.classes_, init = _label_indices(labels, n, K)
         resp = np.eye(K)[init]
@@ -202,45 +316,59 @@ class MixtureIProMP:
                                           (1e-6 * alphas.mean()) ** 2))
         weights, means, covs = gmm_maximization(W, resp, self.prior_cov_, self.prior_strength)
         a_mean, a_var, nk = alpha_m_step(alphas, resp, self.alpha_prior_var_, self.prior_strength)
-        zero = np.zeros((d, d))
-        sq = np.array([expected_sq_residual(st, w, zero) for st, w in zip(stats, W)])  # (n, D)
-        m = np.array([st.m for st in stats])                                          # (n, D)
         noise = fixed_noise if fixed_noise is not None else self._noise_m_step(sq, m, resp)
+        stats = None
+        if self.method == 'em':
+            st = data.stats
+            stats = [ObservationStats(st.G[i], st.b[i], st.yy[i], st.m[i]) for i in range(n)]
         self.log_likelihood_ = []
         prev = -np.inf
         self.converged_ = False
         for it in range(self.max_iter):
             lp_alpha = alpha_log_density(alphas, a_mean, a_var)
+            chols = [linalg.cho_factor(c, lower=True, check_finite=False) for c in covs]
+            new_resp = resp
             if self.method == 'regression':
-                lp = gmm_log_prob(W, weights, means, covs) + lp_alpha            # eq. 7
+                lp, maha = _gmm_log_prob(W, weights, means, chols)
+                lp += lp_alpha                                                         # eq. 7
                 if labels is None:
-                    norm = logsumexp(lp, axis=1)
-                    resp, ll = np.exp(lp - norm[:, None]), float(norm.sum())
+                    norm = _logsumexp_rows(lp)
+                    new_resp, ll = np.exp(lp - norm[:, None]), float(norm.sum())
                 else:
                     ll = float(np.sum(resp * lp))
                 post_means, post_covs = W, None
+                ll += self._covariance_penalty_of_m_step(chols, resp, maha, d)
             else:
-                resp, ll, post_means, post_covs = self._latent_e_step(
+                new_resp, ll, post_means, post_covs = self._latent_e_step(
                     stats, weights, means, covs, noise, lp_alpha,
                     resp if labels is not None else None)
-            ll += sum(covariance_penalty(linalg.cho_factor(c, lower=True), self.prior_cov_,
-                                         self.prior_strength) for c in covs)
+                ll += sum(covariance_penalty(c, self.prior_cov_, self.prior_strength)
+                          for c in chols)
             ll += alpha_penalty(a_var, self.alpha_prior_var_, self.prior_strength)
             self.log_likelihood_.append(ll)
             if ll - prev < self.tol * max(1.0, abs(ll)):
                 self.converged_ = True
+                resp = new_resp
                 break
             prev = ll
+            if (self.method == 'regression' and self.tol > 0 and it + 1 < self.max_iter
+                    and np.array_equal(new_resp, resp)):
+                # The parameters are the M step of these very responsibilities, so the next
+                # iteration would repeat this one (same log-likelihood: converged) unchanged.
+                self.log_likelihood_.append(ll)
+                self.converged_ = True
+                break
+            resp = new_resp
             weights, means, covs = gmm_maximization(post_means, resp, self.prior_cov_,
                                                     self.prior_strength, post_covs)
             a_mean, a_var, nk = alpha_m_step(alphas, resp, self.alpha_prior_var_,
                                              self.prior_strength)
             if self.method == 'em' and fixed_noise is None:
-                sq = np.einsum('ik,ikj->ij' if self.noise == 'tied' else 'ik,ikj->ikj', resp,
-                               np.array([[expected_sq_residual(stats[i], post_means[i, k],
-                                                               post_covs[i, k])
-                                          for k in range(K)] for i in range(n)]))
-                noise = self._noise_m_step(sq, m, resp)
+                sq_k = np.einsum('ik,ikj->ij' if self.noise == 'tied' else 'ik,ikj->ikj', resp,
+                                 np.array([[expected_sq_residual(stats[i], post_means[i, k],
+                                                                 post_covs[i, k])
+                                            for k in range(K)] for i in range(n)]))
+                noise = self._noise_m_step(sq_k, m, resp)
         if self.method == 'regression' and fixed_noise is None:
             noise = self._noise_m_step(sq, m, resp)
         self.n_iter_ = len(self.log_likelihood_)
@@ -262,6 +390,20 @@ class MixtureIProMP:
         if on.ndim > 1 or not np.all(np.isfinite(on) & (on >= 0)):
             raise ValueError('observation_noise must be a number or one number per observed DOF, '
                              f'each >= 0 (in the DOF\'s unit), got {self.observation_noise!r}')
+
+    def _covariance_penalty_of_m_step(self, chols, resp, maha, d):
+        """The covariance priors' log density (promp.covariance_penalty summed over k) at
+        covariances that the M step (eq. 10) made from ``resp``, without inverting them:
+        Sigma_k = (S_k + s Omega) / (n_k + s) with S_k = sum_i r_ik e_ik e_ik^T gives
+        tr(Omega Sigma_k^-1) = ((n_k + s) d - sum_i r_ik e_ik^T Sigma_k^-1 e_ik) / s, and the
+        E step has just computed those squared Mahalanobis distances (``maha``)."""
+        s = self.prior_strength
+        if s == 0:
+            return 0.0
+        nk = resp.sum(axis=0) + 10 * np.finfo(float).eps                 # as gmm_maximization
+        trace = ((nk + s) * d - np.einsum('ik,ik->k', resp, maha)) / s
+        logdet = np.array([2 * np.sum(np.log(np.diag(c[0]))) for c in chols])
+        return float(-0.5 * s * np.sum(trace + logdet))
 
     def _ridge_weights(self, st):
         """Eq. 14 per DOF (ridge); for EM only a starting point (more ridge where data is thin)."""
@@ -350,23 +492,29 @@ class MixtureIProMP:
         the controlled agent (the robot's posture for the same reach), the observed agent alone
         cannot tell a mixture from one broad Gaussian. Missing samples (NaN) are skipped."""
         self._check_fitted()
-        chols = [linalg.cho_factor(c, lower=True) for c in self.covariances_]
-        noise = np.broadcast_to(self.noise_var_, (self.n_components, self.noise_var_.shape[-1]))
-        log_w = np.log(self.weights_)
-        out = []
-        for demo in demonstrations:
+        demos = list(demonstrations)
+        if not demos:
+            return np.empty(0)
+        D = self.n_observed_ + self.n_controlled_
+        stats = []
+        for demo in demos:
             Y = np.hstack([demo.observed, demo.controlled])
-            if Y.shape[1] != noise.shape[1]:
+            if Y.shape[1] != D:
                 raise ValueError(f'demonstration {demo.name!r} has {demo.n_observed_dofs} + '
                                  f'{demo.n_controlled_dofs} DOFs; the model has '
                                  f'{self.n_observed_} + {self.n_controlled_}')
-            st = observation_stats(self.basis_, demo.phase, Y)
-            lp = log_w + alpha_log_density([1.0 / demo.duration], self.alpha_mean_,
-                                           self.alpha_std_ ** 2)[0]
-            lp += [weight_posterior(st, self.means_[k], chols[k], noise[k])[2]
-                   for k in range(self.n_components)]
-            out.append(float(logsumexp(lp)))
-        return np.array(out)
+            stats.append(observation_stats(self.basis_, demo.phase, Y))
+        return self._score_stats(stack_stats(stats),
+                                 np.array([1.0 / demo.duration for demo in demos]))
+
+    def _score_stats(self, stats: ObservationStats, alphas):
+        """:meth:`score_demonstrations` of stacked statistics and their alpha = 1/T."""
+        noise = np.broadcast_to(self.noise_var_, (self.n_components, self.noise_var_.shape[-1]))
+        lp = np.log(self.weights_) + alpha_log_density(alphas, self.alpha_mean_,
+                                                       self.alpha_std_ ** 2)
+        for k in range(self.n_components):
+            lp[:, k] += log_evidence(stats, self.means_[k], self.covariances_[k], noise[k])
+        return _logsumexp_rows(lp)
 
     # --------------------------------------------------------- weight vectors (eqs. 6-7)
     def demonstration_weights(self, demonstrations):
@@ -445,20 +593,35 @@ def loo_rms_by_components(demonstrations, candidates, observe: str = 'final', pr
     ``progress(done, total, K)`` is called after each fit. Needs a controlled agent (for a
     single-agent set use :func:`heldout_loglik_by_components`).
 
+    Every fold's model is the one ``MixtureIProMP(K, **params).fit`` learns from the other
+    demonstrations; what each demonstration contributes on its own (statistics, eq. 14
+    weights) is computed once for all folds.
+
     Returns an array (len(candidates), n) of per-demonstration RMS errors.
     """
     demos = list(demonstrations)
     if demos and demos[0].n_controlled_dofs == 0:
         raise ValueError('leave-one-out RMS of the controlled agent needs a controlled agent; '
                          'these demonstrations have none (use the held-out log-likelihood)')
+    data = _prepare_for_cv(demos, params)
     out = np.empty((len(candidates), len(demos)))
+    everyone = np.arange(len(demos))
     for a, K in enumerate(candidates):
         for i, test in enumerate(demos):
-            model = MixtureIProMP(n_components=K, **params).fit(demos[:i] + demos[i + 1:])
+            model = MixtureIProMP(n_components=K, **params)._fit_prepared(
+                data.take(everyone != i))
             out[a, i] = controlled_rms(model, test, observe)
             if progress:
                 progress(a * len(demos) + i + 1, out.size, K)
     return out
+
+
+def _prepare_for_cv(demos, params) -> _Prepared:
+    """Every demonstration prepared once (checked as ``fit`` checks them) for fits with
+    MixtureIProMP configuration ``params``."""
+    model = MixtureIProMP(**{**params, 'n_components': 1})
+    model._check_params()
+    return model._prepare(_validate_demonstrations(demos, 1))
 
 
 def controlled_rms(model, demo: Demonstration, observe: str = 'final'):
@@ -469,7 +632,9 @@ def controlled_rms(model, demo: Demonstration, observe: str = 'final'):
         rows = rows[-1:]
     elif observe != 'full':
         raise ValueError(f"observe must be 'final' or 'full', got {observe!r}")
-    pred = model.predict_controlled(z[rows], demo.observed[rows], z)['position']
+    k, mean, _ = model.condition(z[rows], demo.observed[rows])
+    dofs = range(model.n_observed_, model.n_observed_ + model.n_controlled_)
+    pred = trajectory_distribution(mean, None, model.basis_, z, dofs=dofs)['position']
     ok = ~np.isnan(demo.controlled).any(axis=1)
     return float(np.sqrt(np.mean((pred[ok] - demo.controlled[ok]) ** 2)))
 
@@ -492,19 +657,37 @@ def heldout_loglik_by_components(demonstrations, candidates, n_folds: int = 5, p
     ``candidates``: works with or without a controlled agent. The same folds for every K, so
     the curves are paired. Returns (len(candidates), n); higher is better.
     """
+    scale = params.pop('prior_scale', _DEFAULT_PRIOR_SCALE)
+    return _heldout_scores(demonstrations, candidates, [scale], n_folds, progress, fold_seed,
+                           params)[0]
+
+
+def _heldout_scores(demonstrations, candidates, scales, n_folds, progress, fold_seed, params):
+    """Held-out log-likelihoods (len(scales), len(candidates), n): every fold's model is the
+    one ``MixtureIProMP(K, prior_scale=scale, **params).fit`` learns from the other folds,
+    scored on the fold. What each demonstration contributes on its own is computed once, and
+    each fold's k-means start of each K once for every scale (it does not depend on the
+    floor). ``progress(done, total, K)`` after each fit."""
     demos = list(demonstrations)
     fold = cv_folds(len(demos), n_folds, fold_seed)
-    out = np.empty((len(candidates), len(demos)))
-    done, total = 0, len(candidates) * (fold.max() + 1)
-    for a, K in enumerate(candidates):
-        for f in range(fold.max() + 1):
-            train = [d for d, g in zip(demos, fold) if g != f]
-            test = np.flatnonzero(fold == f)
-            model = MixtureIProMP(n_components=K, **params).fit(train)
-            out[a, test] = model.score_demonstrations([demos[i] for i in test])
-            done += 1
-            if progress:
-                progress(done, total, K)
+    data = _prepare_for_cv(demos, params)
+    out = np.empty((len(scales), len(candidates), len(demos)))
+    done, total = 0, len(scales) * len(candidates) * (fold.max() + 1)
+    for f in range(fold.max() + 1):
+        train = data.take(fold != f)
+        test = np.flatnonzero(fold == f)
+        test_stats = data.take(test).stats
+        for a, K in enumerate(candidates):
+            init = None
+            for b, scale in enumerate(scales):
+                model = MixtureIProMP(n_components=K, **{**params, 'prior_scale': scale})
+                if init is None and len(train.W) >= K:
+                    init = model._initial_clusters(train)
+                model._fit_prepared(train, init=init)
+                out[b, a, test] = model._score_stats(test_stats, data.alphas[test])
+                done += 1
+                if progress:
+                    progress(done, total, K)
     return out
 
 
@@ -512,6 +695,7 @@ def heldout_loglik_by_components(demonstrations, candidates, n_folds: int = 5, p
 # component variance per weight: half decades wide enough for every scenario evaluated (their
 # optima range from 3e-4, smooth generated reaches, to 1, letters and sampled covariances).
 PRIOR_SCALES = tuple(float(f'{10.0 ** e:.3g}') for e in np.arange(0.5, -4.01, -0.5))
+_DEFAULT_PRIOR_SCALE = inspect.signature(MixtureIProMP).parameters['prior_scale'].default
 
 
 def calibrated_heldout_loglik(demonstrations, candidates, prior_scales=PRIOR_SCALES,
@@ -537,15 +721,7 @@ def calibrated_heldout_loglik(demonstrations, candidates, prior_scales=PRIOR_SCA
     if not scales or not all(np.isfinite(s) and s > 0 for s in scales):
         raise ValueError(f'prior_scales must be positive numbers, got {prior_scales!r}')
     params = {k: v for k, v in params.items() if k != 'prior_scale'}
-    per_scale = len(candidates) * int(min(n_folds, len(demos)))
-    all_scores = []
-    for b, scale in enumerate(scales):
-        step = (None if progress is None else
-                lambda done, total, K, b=b: progress(b * per_scale + done, len(scales) * per_scale,
-                                                     K))
-        all_scores.append(heldout_loglik_by_components(demos, candidates, n_folds, step,
-                                                       fold_seed, prior_scale=scale, **params))
-    S = np.array(all_scores)                          # (scales, candidates, n)
+    S = _heldout_scores(demos, candidates, scales, n_folds, progress, fold_seed, params)
     mean = S.mean(axis=2)
     best = np.argmax(mean, axis=0)
     return {'scores': S[best, np.arange(len(candidates))],

@@ -38,20 +38,20 @@ def observation_stats(basis: GaussianBasis, z, Y) -> ObservationStats:
         raise ValueError(f'Y must have shape (len(z), dofs) = ({z.shape[0]}, D), got {Y.shape}')
     psi = basis(z)
     D, N = Y.shape[1], basis.n_basis
-    G = np.empty((D, N, N))
-    b = np.empty((D, N))
-    yy = np.empty(D)
-    m = np.empty(D)
     observed = ~np.isnan(Y)
+    Y0 = np.where(observed, Y, 0.0)
+    # DOFs observed at the same samples share A_j^T A_j (a demonstration misses whole rows of
+    # an agent): one Gram matrix per distinct pattern of missing samples.
+    G = np.empty((D, N, N))
+    done = np.zeros(D, dtype=bool)
     for j in range(D):
-        rows = observed[:, j]
-        A = psi[rows]
-        y = Y[rows, j]
-        G[j] = A.T @ A
-        b[j] = A.T @ y
-        yy[j] = y @ y
-        m[j] = rows.sum()
-    return ObservationStats(G, b, yy, m)
+        if not done[j]:
+            same = ~done & (observed == observed[:, [j]]).all(axis=0)
+            A = psi[observed[:, j]]
+            G[same] = A.T @ A
+            done |= same
+    return ObservationStats(G, (Y0.T @ psi), np.einsum('tj,tj->j', Y0, Y0),
+                            observed.sum(axis=0).astype(float))
 
 
 def ridge_weights(basis: GaussianBasis, z, Y, ridge: float = 1e-6) -> np.ndarray:
@@ -62,6 +62,18 @@ def ridge_weights(basis: GaussianBasis, z, Y, ridge: float = 1e-6) -> np.ndarray
     N = basis.n_basis
     eye = ridge * np.eye(N)
     return np.concatenate([np.linalg.solve(st.G[j] + eye, st.b[j]) for j in range(len(st.m))])
+
+
+def cho_inverse(cov_chol) -> np.ndarray:
+    """Sigma^-1 from the lower Cholesky factor of Sigma (scipy cho_factor, lower=True): LAPACK
+    potri, a third of the work of solving against the identity; symmetric."""
+    inv, info = linalg.lapack.dpotri(cov_chol[0], lower=1)
+    if info != 0:
+        raise np.linalg.LinAlgError(f'potri failed (info {info}): the factor is singular')
+    low = np.tril(inv)
+    full = low + low.T
+    full.flat[::len(full) + 1] *= 0.5                               # the diagonal counted twice
+    return full
 
 
 def block_diag_info(stats: ObservationStats, noise_var: np.ndarray):
@@ -81,7 +93,7 @@ def weight_posterior(stats: ObservationStats, mean, cov_chol, noise_var):
     """
     d = mean.shape[0]
     info, eta = block_diag_info(stats, noise_var)
-    prior_prec = linalg.cho_solve(cov_chol, np.eye(d))
+    prior_prec = cho_inverse(cov_chol)
     prec = prior_prec + info
     prec_chol = linalg.cho_factor(prec, lower=True)
     post_cov = linalg.cho_solve(prec_chol, np.eye(d))
@@ -98,6 +110,54 @@ def weight_posterior(stats: ObservationStats, mean, cov_chol, noise_var):
     loglik = -0.5 * (m_total * LOG_2PI + np.sum(stats.m * np.log(noise_var))
                      + logdet_prior + logdet_prec + rr - innov @ post_cov @ innov)
     return post_mean, post_cov, loglik
+
+
+def stack_stats(stats) -> ObservationStats:
+    """The statistics of many trajectories stacked along a leading axis: G (n, D, N, N), b (n,
+    D, N), yy (n, D), m (n, D), what :func:`log_evidence` takes."""
+    return ObservationStats(*(np.stack([getattr(st, f) for st in stats])
+                              for f in ('G', 'b', 'yy', 'm')))
+
+
+def log_evidence(stats: ObservationStats, mean, cov, noise_var) -> np.ndarray:
+    """Eq. 21, log p(D_i) = log N(y_i; A_i mu, R + A_i Sigma A_i^T), of every trajectory in
+    ``stats`` (stacked, :func:`stack_stats`) under one weight Gaussian N(mean, Sigma = ``cov``)
+    and per-DOF noise variances: the marginal likelihood of :func:`weight_posterior` for many
+    trajectories at once, in weight space, log|Sigma| + log|P_i| and the quadratic form
+    eta_i^T P_i^-1 eta_i of the information eta_i = A^T R^-1 (y_i - A mu), where
+    P_i = Sigma^-1 + A^T R^-1 A. One batched Cholesky factorisation gives both: of P_i bordered
+    by eta_i, [[P_i, eta_i], [eta_i^T, c_i]], whose last row is (L_i^-1 eta_i)^T; c_i only keeps
+    the last pivot positive (c_i > eta_i^T P_i^-1 eta_i, which is below eta_i^T Sigma eta_i as
+    P_i >= Sigma^-1). Returns (n,)."""
+    G, b, yy, m = stats.G, stats.b, stats.yy, stats.m
+    n, D, N = b.shape
+    d = D * N
+    cov = np.asarray(cov, dtype=float)
+    noise_var = np.broadcast_to(np.asarray(noise_var, dtype=float), (D,))
+    chol = linalg.cho_factor(cov, lower=True, check_finite=False)
+    mu = np.asarray(mean, dtype=float).reshape(D, N)
+    Gmu = (G @ mu[:, :, None])[..., 0]                             # A_j^T A_j mu_j
+    eta = ((b - Gmu) / noise_var[:, None]).reshape(n, d)           # A^T R^-1 (y - A mu)
+    rr = ((yy - 2 * np.einsum('jn,ijn->ij', mu, b) + np.einsum('jn,ijn->ij', mu, Gmu))
+          / noise_var).sum(axis=1)                                 # (y - A mu)^T R^-1 (y - A mu)
+    P = np.empty((n, d + 1, d + 1))
+    P[:, :d, :d] = cho_inverse(chol)
+    for j in range(D):
+        P[:, j * N:(j + 1) * N, j * N:(j + 1) * N] += G[:, j] / noise_var[j]
+    P[:, d, :d] = eta
+    P[:, :d, d] = eta
+    P[:, d, d] = 2 * np.sum((eta @ cov) * eta, axis=1) + 1.0
+    for Pi in P:
+        # LAPACK factors P_i in place: P_i^T is P_i in Fortran order, whose lower factor L_i
+        # is then the upper triangle of P_i (row-major): L_i[d, :d] is the column P_i[:d, d].
+        info = linalg.lapack.dpotrf(Pi.T, lower=1, overwrite_a=1, clean=0)[1]
+        if info != 0:
+            raise np.linalg.LinAlgError('the posterior precision is not positive definite')
+    u = P[:, :d, d]                                                # L_i^-1 eta_i
+    logdet_prec = 2 * np.log(np.diagonal(P[:, :d, :d], axis1=1, axis2=2)).sum(axis=1)
+    logdet_prior = 2 * np.sum(np.log(np.diag(chol[0])))
+    return -0.5 * (m.sum(axis=1) * LOG_2PI + (m * np.log(noise_var)).sum(axis=1)
+                   + logdet_prior + logdet_prec + rr - np.einsum('ij,ij->i', u, u))
 
 
 def expected_sq_residual(stats: ObservationStats, post_mean, post_cov):
@@ -117,7 +177,7 @@ def covariance_penalty(cov_chol, prior_cov, strength):
     log|Sigma|); ``prior_cov`` Omega is a matrix or the diagonal of one."""
     if strength == 0:
         return 0.0
-    inv = linalg.cho_solve(cov_chol, np.eye(cov_chol[0].shape[0]))
+    inv = cho_inverse(cov_chol)
     trace = np.sum(prior_cov * np.diag(inv)) if prior_cov.ndim == 1 else np.sum(prior_cov * inv)
     logdet = 2 * np.sum(np.log(np.diag(cov_chol[0])))
     return -0.5 * strength * (trace + logdet)

@@ -273,6 +273,10 @@ def _reading(path: Path):
         reader.close()
 
 
+# libyaml's safe loader where PyYAML was built with it (the same documents, parsed in C).
+_YAML_LOADER = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)
+
+
 def bag_custom_data(path) -> dict:
     """The ``custom_data`` map of a bag directory's metadata.yaml ({} if none)."""
     path = Path(path)
@@ -280,7 +284,7 @@ def bag_custom_data(path) -> dict:
     if not meta.is_file():
         return {}
     try:
-        info = yaml.safe_load(meta.read_text())['rosbag2_bagfile_information']
+        info = yaml.load(meta.read_text(), Loader=_YAML_LOADER)['rosbag2_bagfile_information']
     except Exception as exc:
         raise BagError(path, f'unreadable metadata.yaml: {exc}') from exc
     custom = info.get('custom_data') or {}
@@ -344,63 +348,30 @@ def read_bag(path, *, wrist_topic: str = WRIST_TOPIC, joint_topic: str = JOINT_T
     path = Path(path)
     joint_names = tuple(joint_names)
     custom = bag_custom_data(path) if path.is_dir() else {}
-    ts = typestore()
     with _reading(path) as reader:
         conns = reader.connections
         wrist_conns = _find_connection(path, conns, wrist_topic, WRIST_TYPE)
         joint_conns = _find_connection(path, conns, joint_topic, JOINT_TYPE)
         wrist_ids = {c.id for c in wrist_conns}
-        w_ns, w_xyz, w_quat, frames = [], [], [], set()
-        j_ns, j_q, j_qd = [], [], []
-        index = None
-        last_names = None
+        wrist_msgs, joint_msgs = [], []
         for conn, log_ns, data in reader.messages(connections=wrist_conns + joint_conns):
-            try:
-                msg = ts.deserialize_cdr(data, conn.msgtype)
-            except Exception as exc:
-                raise BagError(path, f'cannot decode a {conn.msgtype} message on {conn.topic} at '
-                                     f'log time {log_ns} ns: {type(exc).__name__}: {exc}') from exc
-            if conn.id in wrist_ids:
-                p, q = msg.pose.position, msg.pose.orientation
-                w_ns.append(_stamp_or_log(msg.header.stamp, log_ns))
-                w_xyz.append((p.x, p.y, p.z))
-                w_quat.append((q.x, q.y, q.z, q.w))
-                frames.add(msg.header.frame_id)
-            else:
-                names = list(msg.name)
-                if names != last_names:
-                    missing = [n for n in joint_names if n not in names]
-                    if missing:
-                        raise BagError(path, f'JointState on {joint_topic!r} lacks joints {missing} '
-                                             f'(has {names})')
-                    index = [names.index(n) for n in joint_names]
-                    last_names = names
-                pos = np.asarray(msg.position, dtype=float)
-                if pos.size != len(names):
-                    raise BagError(path, f'JointState on {joint_topic!r} at log time {log_ns} ns has '
-                                         f'{pos.size} positions for {len(names)} names')
-                vel = np.asarray(msg.velocity, dtype=float)
-                j_ns.append(_stamp_or_log(msg.header.stamp, log_ns))
-                j_q.append(pos[index])
-                j_qd.append(vel[index] if vel.size == len(names) else None)
-
-    if not w_ns:
+            (wrist_msgs if conn.id in wrist_ids else joint_msgs).append((conn, log_ns, data))
+    if not wrist_msgs:
         raise BagError(path, f'topic {wrist_topic!r} has no messages')
-    if not j_ns:
+    if not joint_msgs:
         raise BagError(path, f'topic {joint_topic!r} has no messages')
+    # A recorder writes one topic's messages with one layout (the same frame id and joint
+    # names): then every field is at the same offset of every message and the whole stream is
+    # read as one array; any other stream is decoded message by message.
+    wrist = _poses_at_fixed_offsets(wrist_msgs) or _decode_poses(path, wrist_msgs)
+    joints = (_joint_states_at_fixed_offsets(joint_msgs, joint_names)
+              or _decode_joint_states(path, joint_msgs, joint_names, joint_topic))
+    w_ns, w_xyz, w_quat, frames = wrist
+    j_ns, j_q, qd = joints
     if len(frames) > 1:
         raise BagError(path, f'wrist messages on {wrist_topic!r} use several frames {sorted(frames)}')
-
-    w_ns = np.asarray(w_ns, dtype=np.int64)
-    j_ns = np.asarray(j_ns, dtype=np.int64)
-    w_xyz = np.asarray(w_xyz, dtype=float)
-    w_quat = np.asarray(w_quat, dtype=float)
-    j_q = np.asarray(j_q, dtype=float)
     if not np.all(np.isfinite(j_q)):
         raise BagError(path, f'joint positions on {joint_topic!r} contain NaN or Inf')
-    qd = None
-    if all(v is not None for v in j_qd):
-        qd = np.asarray(j_qd, dtype=float)
     # Sort by stamp (stamps can arrive out of order) and drop repeated stamps.
     w_order = _unique_sorted(w_ns)
     j_order = _unique_sorted(j_ns)
@@ -414,6 +385,151 @@ def read_bag(path, *, wrist_topic: str = WRIST_TOPIC, joint_topic: str = JOINT_T
         wrist_frame=frames.pop(), joint_t=(j_ns - start) / 1e9, joint_q=j_q,
         joint_names=joint_names, label=custom.get(LABEL_KEY), start_time_ns=start,
         joint_qd=qd, custom_data=custom)
+
+
+def _deserialize(path, conn, log_ns, data):
+    try:
+        return typestore().deserialize_cdr(data, conn.msgtype)
+    except Exception as exc:
+        raise BagError(path, f'cannot decode a {conn.msgtype} message on {conn.topic} at '
+                             f'log time {log_ns} ns: {type(exc).__name__}: {exc}') from exc
+
+
+def _decode_poses(path, msgs):
+    """(stamps ns, xyz, quaternions, set of frames) of PoseStamped messages, one by one."""
+    ns, xyz, quat, frames = [], [], [], set()
+    for conn, log_ns, data in msgs:
+        msg = _deserialize(path, conn, log_ns, data)
+        p, q = msg.pose.position, msg.pose.orientation
+        ns.append(_stamp_or_log(msg.header.stamp, log_ns))
+        xyz.append((p.x, p.y, p.z))
+        quat.append((q.x, q.y, q.z, q.w))
+        frames.add(msg.header.frame_id)
+    return (np.asarray(ns, dtype=np.int64), np.asarray(xyz, dtype=float),
+            np.asarray(quat, dtype=float), frames)
+
+
+def _decode_joint_states(path, msgs, joint_names, joint_topic):
+    """(stamps ns, positions of ``joint_names``, their velocities or None) of JointState
+    messages, one by one."""
+    ns, qs, qds = [], [], []
+    index = last_names = None
+    for conn, log_ns, data in msgs:
+        msg = _deserialize(path, conn, log_ns, data)
+        names = list(msg.name)
+        if names != last_names:
+            missing = [n for n in joint_names if n not in names]
+            if missing:
+                raise BagError(path, f'JointState on {joint_topic!r} lacks joints {missing} '
+                                     f'(has {names})')
+            index = [names.index(n) for n in joint_names]
+            last_names = names
+        pos = np.asarray(msg.position, dtype=float)
+        if pos.size != len(names):
+            raise BagError(path, f'JointState on {joint_topic!r} at log time {log_ns} ns has '
+                                 f'{pos.size} positions for {len(names)} names')
+        vel = np.asarray(msg.velocity, dtype=float)
+        ns.append(_stamp_or_log(msg.header.stamp, log_ns))
+        qs.append(pos[index])
+        qds.append(vel[index] if vel.size == len(names) else None)
+    qd = np.asarray(qds, dtype=float) if all(v is not None for v in qds) else None
+    return np.asarray(ns, dtype=np.int64), np.asarray(qs, dtype=float), qd
+
+
+# CDR as rosbag2 stores it from rmw: a 4-byte encapsulation header (00 01 00 00: little endian),
+# then the fields, each aligned to its size from the end of that header; strings are a uint32
+# length (with the terminating NUL) and the bytes, sequences a uint32 count and the elements.
+_CDR_LE = b'\x00\x01\x00\x00'
+
+
+def _same_size_rows(msgs):
+    """The messages' bytes as one (n, size) uint8 array, or None unless they are all the same
+    little-endian CDR size."""
+    size = len(msgs[0][2])
+    if any(len(data) != size for _, _, data in msgs) or bytes(msgs[0][2][:4]) != _CDR_LE:
+        return None
+    return np.frombuffer(b''.join(bytes(data) for _, _, data in msgs),
+                         dtype=np.uint8).reshape(len(msgs), size)
+
+
+def _aligned(offset: int, size: int) -> int:
+    """``offset`` (from the start of the message) moved to the next multiple of ``size`` past
+    the encapsulation header."""
+    return 4 + -(-(offset - 4) // size) * size
+
+
+def _field(rows, offset: int, dtype: str, count: int = 1):
+    """``count`` values of ``dtype`` at ``offset`` of every row: (n, count)."""
+    width = np.dtype(dtype).itemsize * count
+    return np.ascontiguousarray(rows[:, offset:offset + width]).view(dtype)
+
+
+def _stamps(rows, log_ns):
+    """header.stamp of every row in ns (fields at bytes 4 and 8); the log time where it is 0."""
+    ns = (_field(rows, 4, '<i4')[:, 0].astype(np.int64) * 1_000_000_000
+          + _field(rows, 8, '<u4')[:, 0].astype(np.int64))
+    return np.where(ns > 0, ns, np.asarray(log_ns, dtype=np.int64))
+
+
+def _constant(rows, lo: int, hi: int) -> bool:
+    return bool((rows[:, lo:hi] == rows[0, lo:hi]).all())
+
+
+def _poses_at_fixed_offsets(msgs):
+    """:func:`_decode_poses` for messages that share one layout (the same size and frame id),
+    or None. PoseStamped: stamp (int32 sec, uint32 nanosec), frame_id, then 7 float64."""
+    rows = _same_size_rows(msgs)
+    if rows is None or rows.shape[1] < 16:
+        return None
+    length = int(_field(rows[:1], 12, '<u4')[0, 0])
+    pose = _aligned(16 + length, 8)
+    if pose + 56 != rows.shape[1] or not _constant(rows, 12, 16 + length):
+        return None
+    values = _field(rows, pose, '<f8', 7)
+    frame = bytes(rows[0, 16:16 + length]).rstrip(b'\x00').decode()
+    return (_stamps(rows, [m[1] for m in msgs]), values[:, :3].copy(), values[:, 3:].copy(),
+            {frame})
+
+
+def _joint_states_at_fixed_offsets(msgs, joint_names):
+    """:func:`_decode_joint_states` for messages that share one layout (the same size, frame
+    id and names, and as many positions as names), or None. JointState: stamp, frame_id,
+    string[] name, float64[] position, velocity, effort."""
+    rows = _same_size_rows(msgs)
+    if rows is None:
+        return None
+    first = bytes(rows[0])
+    try:
+        o = 16 + int.from_bytes(first[12:16], 'little')                      # past frame_id
+        o = _aligned(o, 4)
+        count = int.from_bytes(first[o:o + 4], 'little')
+        o += 4
+        names = []
+        if 4 * count > len(first) - o:                  # not this layout (or a broken message)
+            return None
+        for _ in range(count):
+            o = _aligned(o, 4)
+            length = int.from_bytes(first[o:o + 4], 'little')
+            names.append(first[o + 4:o + 4 + length].rstrip(b'\x00').decode())
+            o += 4 + length
+        arrays = []
+        for _ in range(3):                                     # position, velocity, effort
+            o = _aligned(o, 4)
+            n = int.from_bytes(first[o:o + 4], 'little')
+            start = _aligned(o + 4, 8) if n else o + 4
+            arrays.append((o, start, n))
+            o = start + 8 * n
+    except UnicodeDecodeError:
+        return None
+    (p_count, p_start, n_pos), (v_count, v_start, n_vel), (e_count, _, _) = arrays
+    if (o != rows.shape[1] or n_pos != len(names) or not set(joint_names) <= set(names)
+            or not _constant(rows, 12, p_start) or not _constant(rows, v_count, v_count + 4)
+            or not _constant(rows, e_count, e_count + 4)):
+        return None
+    index = [names.index(n) for n in joint_names]
+    q = _field(rows, p_start, '<f8', n_pos)[:, index]
+    qd = _field(rows, v_start, '<f8', n_vel)[:, index] if n_vel == len(names) else None
+    return _stamps(rows, [m[1] for m in msgs]), q, qd
 
 
 def _unique_sorted(ns: np.ndarray) -> np.ndarray:

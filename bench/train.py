@@ -1,0 +1,188 @@
+"""What `mixture-ip train` costs on the 48 box-assembly bags, and where the time goes.
+
+The bags are generated into a temporary folder (`mixture-ip generate --scenario box_assembly`
+defaults; not timed). Each run is a fresh process doing what `mixture-ip train bags/ --out
+model.npz` does: load the bags (load_s), then app.training.train_to_file with K chosen over
+1..6 (train_s): the calibrated held-out log-likelihood (heldout_s), the leave-one-out RMS at each
+K's floor (loo_s), both together selection_s, the final fit (fit_s), the novelty calibration
+(novelty_s) and the save (save_s). n_fits counts every mixture fit; peak_rss_mb is the run's
+peak resident memory. Top-level keys are medians over the runs (the machine may be shared).
+
+``reference`` is the same path with the K curves computed by the straightforward loop, one
+MixtureIProMP(...).fit of the demonstrations of each fold (same folds, seeds and floors), in
+the same script: the ratio ``speedup_vs_reference`` is what reusing per-demonstration work
+across folds gains; ``same_selection`` whether both chose the same K and floor with curves
+equal to 1e-9.
+
+Prints one JSON object.
+
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python bench/train.py [--runs 3] [--reference-runs 1]
+"""
+
+import argparse
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+
+KEYS = ('train_s', 'load_s', 'selection_s', 'heldout_s', 'loo_s', 'novelty_s', 'fit_s', 'save_s',
+        'peak_rss_mb', 'n_fits')
+
+
+class Phases:
+    """Inclusive wall time and call count of wrapped functions; a call made inside another
+    wrapped call of a different phase is counted but not timed under its own key (the final
+    fit is a fit outside the selection and the novelty calibration)."""
+
+    def __init__(self):
+        self.seconds, self.calls, self.stack = {}, {}, []
+
+    def wrap(self, owner, name, key, timed=True):
+        original = getattr(owner, name)
+
+        def wrapper(*args, **kwargs):
+            self.calls[key] = self.calls.get(key, 0) + 1
+            if not timed or (self.stack and key == 'fit'):
+                return original(*args, **kwargs)
+            self.stack.append(key)
+            t0 = time.perf_counter()
+            try:
+                return original(*args, **kwargs)
+            finally:
+                self.seconds[key] = self.seconds.get(key, 0.0) + time.perf_counter() - t0
+                self.stack.pop()
+        setattr(owner, name, wrapper)
+
+
+def plain_heldout(demos, candidates, prior_scales, n_folds=5, progress=None, fold_seed=0,
+                  **params):
+    """calibrated_heldout_loglik by the straightforward loop (one fit per fold and floor)."""
+    import numpy as np
+    from mixture_ip_ros.core.mixture import MixtureIProMP, cv_folds
+    fold = cv_folds(len(demos), n_folds, fold_seed)
+    scales = [float(s) for s in prior_scales]
+    params = {k: v for k, v in params.items() if k != 'prior_scale'}
+    S = np.empty((len(scales), len(candidates), len(demos)))
+    for b, scale in enumerate(scales):
+        for a, K in enumerate(candidates):
+            for f in range(fold.max() + 1):
+                test = np.flatnonzero(fold == f)
+                model = MixtureIProMP(n_components=K, prior_scale=scale, **params).fit(
+                    [d for d, g in zip(demos, fold) if g != f])
+                S[b, a, test] = model.score_demonstrations([demos[i] for i in test])
+    mean = S.mean(axis=2)
+    best = np.argmax(mean, axis=0)
+    return {'scores': S[best, np.arange(len(candidates))],
+            'prior_scale': [scales[b] for b in best], 'prior_scales': scales,
+            'mean_by_scale': mean}
+
+
+def plain_loo(demos, candidates, observe='final', progress=None, **params):
+    """loo_rms_by_components by the straightforward loop (one fit per left-out demonstration)."""
+    import numpy as np
+    from mixture_ip_ros.core.mixture import MixtureIProMP, controlled_rms
+    return np.array([[controlled_rms(MixtureIProMP(n_components=K, **params).fit(
+        demos[:i] + demos[i + 1:]), test, observe) for i, test in enumerate(demos)]
+        for K in candidates])
+
+
+def one_run(bags: Path, reference: bool) -> dict:
+    """Load and train once in this process (the way `mixture-ip train` does)."""
+    from mixture_ip_ros.app import training
+    from mixture_ip_ros.core import mixture
+    from mixture_ip_ros.io.dataset import load_dataset
+    from mixture_ip_ros.robot.description import load_description
+    phases = Phases()
+    if reference:
+        training.calibrated_heldout_loglik = plain_heldout
+        training.loo_rms_by_components = plain_loo
+    phases.wrap(training, 'calibrated_heldout_loglik', 'heldout_s')
+    phases.wrap(training, 'loo_rms_by_components', 'loo_s')
+    phases.wrap(training, 'calibrate_novelty', 'novelty_s')
+    phases.wrap(training, 'save_model', 'save_s')
+    phases.wrap(mixture.MixtureIProMP, 'fit', 'fit')
+    counted = '_fit_prepared' if hasattr(mixture.MixtureIProMP, '_fit_prepared') else 'fit'
+    phases.wrap(mixture.MixtureIProMP, counted, 'n_fits', timed=False)
+    robot = load_description(None)
+    t0 = time.perf_counter()
+    demos, skipped = load_dataset(bags, joint_names=robot.joint_names,
+                                  transform=robot.world_to_base())
+    t1 = time.perf_counter()
+    with tempfile.TemporaryDirectory() as out:
+        model, info = training.train_to_file(
+            demos, Path(out) / 'model.npz', robot=robot, n_basis=15, method='regression',
+            criterion='auto', noise='tied', candidates=range(1, 7))
+    t2 = time.perf_counter()
+    sel = info['selection']
+    s = phases.seconds
+    return {'train_s': t2 - t1, 'load_s': t1 - t0,
+            'selection_s': s.get('heldout_s', 0.0) + s.get('loo_s', 0.0),
+            'heldout_s': s.get('heldout_s', 0.0), 'loo_s': s.get('loo_s', 0.0),
+            'novelty_s': s.get('novelty_s', 0.0), 'fit_s': s.get('fit', 0.0),
+            'save_s': s.get('save_s', 0.0),
+            'peak_rss_mb': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+            'n_fits': phases.calls.get('n_fits', 0), 'n_demonstrations': len(demos),
+            'n_skipped': len(skipped), 'chosen': sel['chosen'], 'prior_scale': sel['prior_scale'],
+            'heldout_mean_by_prior_scale': sel['heldout_loglik']['mean_by_prior_scale'],
+            'loo_rms_mean': info['loo_rms_mean']}
+
+
+def run_in_process(bags: Path, reference: bool) -> dict:
+    cmd = [sys.executable, __file__, '--one', str(bags)] + (['--reference'] if reference else [])
+    out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def medians(runs) -> dict:
+    out = {k: round(statistics.median(r[k] for r in runs), 3) for k in KEYS}
+    out['n_fits'] = int(out['n_fits'])
+    out['runs'] = {k: [round(r[k], 3) for r in runs] for k in ('train_s', 'load_s')}
+    return out
+
+
+def same_curves(a: dict, b: dict, rtol: float = 1e-9) -> bool:
+    import numpy as np
+    return (a['chosen'] == b['chosen'] and a['prior_scale'] == b['prior_scale']
+            and np.allclose(a['heldout_mean_by_prior_scale'], b['heldout_mean_by_prior_scale'],
+                            rtol=rtol, atol=0)
+            and np.allclose(a['loo_rms_mean'], b['loo_rms_mean'], rtol=rtol, atol=0))
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument('--runs', type=int, default=3)
+    p.add_argument('--reference-runs', type=int, default=1,
+                   help='runs of the straightforward loop (0: skip it)')
+    p.add_argument('--one', type=Path, default=None, help=argparse.SUPPRESS)
+    p.add_argument('--reference', action='store_true', help=argparse.SUPPRESS)
+    args = p.parse_args()
+    if args.one is not None:
+        print(json.dumps(one_run(args.one, args.reference)))
+        return
+    from mixture_ip_ros.scenarios.generated import write_scenario_bags
+    with tempfile.TemporaryDirectory() as tmp:
+        bags = Path(tmp) / 'bags'
+        write_scenario_bags('box_assembly', bags, seed=0)
+        runs = [run_in_process(bags, False) for _ in range(args.runs)]
+        refs = [run_in_process(bags, True) for _ in range(args.reference_runs)]
+    out = {'scenario': 'box_assembly', 'n_demonstrations': runs[0]['n_demonstrations'],
+           'candidates': list(range(1, 7)), 'chosen': runs[0]['chosen'],
+           'prior_scale': runs[0]['prior_scale'], **medians(runs),
+           'cpu_count': os.cpu_count(), 'load_average': [round(x, 2) for x in os.getloadavg()]}
+    if refs:
+        ref = medians(refs)
+        out['reference'] = ref
+        out['speedup_vs_reference'] = round(ref['train_s'] / out['train_s'], 2)
+        out['same_selection'] = all(same_curves(r, runs[0]) for r in refs)
+    print(json.dumps(out))
+
+
+if __name__ == '__main__':
+    main()

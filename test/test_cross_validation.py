@@ -1,0 +1,129 @@
+"""K selection's cross-validation reuses what does not change between folds (per-demonstration
+statistics and weights, each fold's k-means start across covariance floors, batched evidences):
+its curves must be the ones the straightforward loop gives, one fit per fold from the
+demonstrations, with the same folds and seeds."""
+
+import numpy as np
+import pytest
+
+from mixture_ip_ros.app.training import train
+from mixture_ip_ros.core.demonstration import Demonstration
+from mixture_ip_ros.core.mixture import (MixtureIProMP, calibrated_heldout_loglik, controlled_rms,
+                                         cv_folds, heldout_loglik_by_components, kmeans,
+                                         loo_rms_by_components)
+from mixture_ip_ros.scenarios.synthetic import mixture_demos
+
+
+def plain_kmeans(X, n_clusters, random_state=0, n_init=10, max_iter=100):
+    """k-means++ and Lloyd, one run after another, every distance summed directly."""
+    rng = np.random.default_rng(random_state)
+    best, best_inertia = None, np.inf
+    for _ in range(n_init):
+        centers = [X[rng.integers(len(X))]]
+        for _ in range(1, n_clusters):
+            d2 = np.min([np.sum((X - c) ** 2, axis=1) for c in centers], axis=0)
+            p = d2 / d2.sum() if d2.sum() > 0 else np.full(len(X), 1 / len(X))
+            centers.append(X[rng.choice(len(X), p=p)])
+        C = np.array(centers)
+        for _ in range(max_iter):
+            labels = np.argmin(((X[:, None, :] - C[None]) ** 2).sum(-1), axis=1)
+            newC = np.array([X[labels == k].mean(0) if np.any(labels == k) else C[k]
+                             for k in range(n_clusters)])
+            if np.allclose(newC, C):
+                break
+            C = newC
+        inertia = np.sum((X - C[labels]) ** 2)
+        if inertia < best_inertia:
+            best, best_inertia = labels, inertia
+    return best
+
+
+def plain_heldout(demos, candidates, scales, n_folds=5, **params):
+    fold = cv_folds(len(demos), n_folds, 0)
+    out = np.empty((len(scales), len(candidates), len(demos)))
+    for b, scale in enumerate(scales):
+        for a, K in enumerate(candidates):
+            for f in range(fold.max() + 1):
+                train_set = [d for d, g in zip(demos, fold) if g != f]
+                test = np.flatnonzero(fold == f)
+                model = MixtureIProMP(K, prior_scale=scale, **params).fit(train_set)
+                out[b, a, test] = model.score_demonstrations([demos[i] for i in test])
+    return out
+
+
+def plain_loo(demos, candidates, **params):
+    return np.array([[controlled_rms(MixtureIProMP(K, **params).fit(demos[:i] + demos[i + 1:]),
+                                     test) for i, test in enumerate(demos)]
+                     for K in candidates])
+
+
+def occluded(demos, seed=0):
+    """The observed agent missing for a stretch of every other demonstration."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i, d in enumerate(demos):
+        obs = d.observed.copy()
+        if i % 2:
+            lo = int(rng.integers(1, len(d.t) // 2))
+            obs[lo:lo + len(d.t) // 5] = np.nan
+        out.append(Demonstration(d.t, obs, d.controlled, label=d.label))
+    return out
+
+
+def test_kmeans_gives_the_labels_of_the_plain_loop():
+    rng = np.random.default_rng(1)
+    for trial in range(60):
+        n, dim = int(rng.integers(4, 50)), int(rng.integers(1, 60))
+        X = rng.standard_normal((n, dim)) * rng.uniform(0.1, 10, dim)
+        if trial % 3 == 0:
+            X[:n // 2] += 3
+        if trial % 4 == 0:
+            X = np.round(X)                           # ties and repeated rows
+        for K in range(1, min(6, n) + 1):
+            assert np.array_equal(kmeans(X, K, trial), plain_kmeans(X, K, trial)), (trial, K)
+
+
+@pytest.mark.parametrize('n_ctrl', [3, 0])
+def test_heldout_curves_equal_the_straightforward_loop(n_ctrl):
+    demos = occluded(mixture_demos(seed=5, n_obs=2, n_ctrl=n_ctrl, counts=(8, 9, 7))[0])
+    candidates, scales = [1, 2, 3, 4], [1.0, 0.1, 0.01]
+    plain = plain_heldout(demos, candidates, scales, n_basis=8)
+    cal = calibrated_heldout_loglik(demos, candidates, scales, n_basis=8)
+    assert np.allclose(cal['mean_by_scale'], plain.mean(axis=2), rtol=1e-12, atol=0)
+    best = np.argmax(plain.mean(axis=2), axis=0)
+    assert cal['prior_scale'] == [scales[b] for b in best]
+    assert np.allclose(cal['scores'], plain[best, range(len(candidates))], rtol=1e-12, atol=0)
+    fixed = heldout_loglik_by_components(demos, candidates, n_basis=8, prior_scale=0.1)
+    assert np.allclose(fixed, plain[1], rtol=1e-12, atol=0)
+
+
+def test_leave_one_out_curve_equals_the_straightforward_loop():
+    demos = occluded(mixture_demos(seed=5, n_obs=2, n_ctrl=3, counts=(6, 7, 5))[0])
+    candidates = [1, 2, 3, 4]
+    for params in ({'n_basis': 8}, {'n_basis': 8, 'prior_scale': 0.3, 'noise': 'per_component'}):
+        assert np.allclose(loo_rms_by_components(demos, candidates, **params),
+                           plain_loo(demos, candidates, **params), rtol=1e-12, atol=0)
+
+
+def test_em_stops_when_the_responsibilities_repeat_with_the_parameters_of_the_full_loop():
+    """An E step that gives the responsibilities of the last M step back means the next
+    iteration repeats this one: the fit stops there with what two full iterations give."""
+    demos = mixture_demos(seed=0)[0]
+    short = MixtureIProMP(3, n_basis=8).fit(demos)
+    full = MixtureIProMP(3, n_basis=8, tol=0.0, max_iter=2).fit(demos)   # no stopping rule
+    assert short.n_iter_ == 2 and short.converged_
+    assert short.log_likelihood_ == full.log_likelihood_
+    for name in ('weights_', 'means_', 'covariances_', 'resp_', 'noise_var_', 'alpha_mean_',
+                 'alpha_std_'):
+        assert np.array_equal(getattr(short, name), getattr(full, name)), name
+
+
+def test_training_keeps_three_patterns_on_box_assembly():
+    from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE
+    from mixture_ip_ros.scenarios.generated import box_assembly
+    demos = [g.to_demonstration(0.01) for g in box_assembly(0, occlusion=0.5)]
+    model, info = train(demos, candidates=range(1, 7), observation_noise=WRIST_OBSERVATION_NOISE)
+    sel = info['selection']
+    assert sel['chosen'] == 3 and sel['clear_optimum']
+    assert sel['heldout_loglik']['chosen'] == 3 and sel['loo_rms']['chosen'] == 3
+    assert model.n_components == 3 and model.prior_scale == sel['prior_scale']
