@@ -122,12 +122,17 @@ def test_completion_curves_equal_the_straightforward_loop():
     assert cal['loglik']['prior_scale'] == ll['prior_scale']
 
 
-@pytest.mark.parametrize('seed', [5, 0, 1, 2, 3])
-def test_completion_finds_the_sampled_number_of_components(seed):
-    demos = mixture_demos(seed=seed, n_obs=2, n_ctrl=0)[0]
-    cal = calibrated_heldout_curves(demos, [1, 2, 3, 4, 5], n_basis=8)
-    curve = selection_curve(cal['completion']['scores'], higher_is_better=True, paired=True)
-    assert [1, 2, 3, 4, 5][curve['index']] == 3 and curve['clear']
+def test_completion_and_heldout_loglik_on_ten_sampled_sets_of_three_patterns():
+    """Why training keeps the held-out log-likelihood for one agent: on ten sampled sets of
+    three well separated patterns it finds 3 every time, the completion criterion in 9 of 10
+    (seed 9: 2). bench/selection_curves.py has the same at wider within-pattern spreads."""
+    right = {'loglik': 0, 'completion': 0}
+    for seed in range(10):
+        demos = mixture_demos(seed=seed, n_obs=2, n_ctrl=0)[0]
+        cal = calibrated_heldout_curves(demos, [1, 2, 3, 4, 5], n_basis=8)
+        for name in right:
+            right[name] += selection_curve(cal[name]['scores'], True, paired=True)['index'] == 2
+    assert right == {'loglik': 10, 'completion': 9}
 
 
 def test_completion_keeps_one_sampled_component():
