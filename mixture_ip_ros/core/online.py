@@ -167,7 +167,7 @@ class OnlineEstimator:
                                        basis.width, y, self._noise, self._prior, self._hyp, joint)
         self.n_observations += 1
         self._times.append(float(t))
-        self._values.append(y)
+        self._values.append(y.copy())           # the caller may reuse its buffer
         self._joint = joint.reshape(self.n_components, -1)
         self._joint.flags.writeable = False
 
