@@ -5,14 +5,16 @@
   posture vs the demonstrated one) from the final wrist position; beyond the thesis, the same
   online: the OnlineEstimator fed the first x % of the held-out wrist stream, phase unknown.
 - pole (3.4.1, Figs. 7-8): leave-one-out RMS vs K; flange paths of one Gaussian vs the mixture.
-- phase (4.3.1, Figs. 19, 26-27): RMS of the completed letter vs observed fraction, alpha estimate.
+- phase (4.3.1, Figs. 19, 26-27): RMS of the completed letter vs observed fraction, alpha estimate
+  (the MAP between the online estimator's grid values).
 - missing_data (4.3.2, Figs. 36-37, 42-43): EM vs per-trajectory regression from training letters
   with a block of 180 missing samples; EM log-likelihood per iteration.
 - gestures (real human motion, beyond the thesis): PickupGestureWiimoteZ (scenarios.gestures), a
   single-agent set: who made the gesture, from the first 30/50/70/100 % of it, by the
   unsupervised mixture (K by held-out log-likelihood at calibrated covariance floors, components
   named by majority over the training labels), phase unknown (online) and known (the same
-  samples); by the supervised mixture (one component per class); and baselines on the same
+  samples), and online once the end time is given (the phase is 1 there); by the supervised
+  mixture (one component per class); and baselines on the same
   split in the same run: a per-class ProMP, scikit-learn's GaussianMixture on the same ridge
   weights, 1-NN DTW.
 

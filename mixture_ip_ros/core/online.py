@@ -349,7 +349,7 @@ class OnlineEstimator:
         alpha = 1/t_end exactly: p(k) p(alpha | k) p(D | k, alpha) normalised over k (eqs. 11,
         17-18 at that alpha; the Jacobian from T to alpha is the same for every k). This is the
         batch posterior with the phase known (MixtureIProMP.component_posterior with alpha),
-        from the samples absorbed. Raises ValueError for a t_end not after the last sample
+        from the samples absorbed. Raises ValueError for a t_end before the last sample
         absorbed."""
         if not self._times:
             raise ValueError('no observation absorbed yet')
