@@ -10,6 +10,9 @@ from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.core.phase import (alpha_m_step, alpha_prior_std, log_evidence_batch, timing_variance,
                                        phase_posterior_batch)
 
+from scipy.special import logsumexp
+from scipy.stats import multivariate_normal, norm
+
 from mixture_ip_ros.scenarios.synthetic import mixture_demos, random_spd, sample_trajectory
 
 
@@ -359,3 +362,131 @@ def test_pruning_never_empties_the_posterior_or_makes_it_nan(model_and_demos):
     for bad in (-1e-3, 1.0 / 36, 0.5):
         with pytest.raises(ValueError, match='prune_below'):
             OnlineEstimator(model, n_alpha=12, prune_below=bad)
+
+
+def _dense_evidence(model, k, z, Y):
+    """log N(D; A mu_k, Sigma_D + A Sigma_k A^T) of the observed agent, D stacked DOF-major."""
+    P = model.n_observed_
+    do = P * model.n_basis
+    A = np.kron(np.eye(P), model.basis_(z))
+    S = (np.diag(np.repeat(model._observed_noise(k), len(z)))
+         + A @ model.covariances_[k][:do, :do] @ A.T)
+    return multivariate_normal(A @ model.means_[k][:do], S).logpdf(Y.T.ravel())
+
+
+def test_posterior_at_is_the_grid_state_on_the_grid_and_dense_conditioning_between(
+        model_and_demos):
+    model, demos, _ = model_and_demos
+    est = OnlineEstimator(model, n_alpha=9, min_interval=0.0)
+    demo = demos[11]
+    idx = np.arange(0, int(0.6 * len(demo.t)), 6)
+    for i in idx[::-1]:                                   # any order: the weights are static
+        est.absorb(demo.t[i], demo.observed[i])
+    for k in range(3):
+        for m in (0, 4, 8):
+            mean, cov, ll = est.posterior_at(k, est.alphas[m])
+            want_mean, want_cov = est.observed_weights(k, m)
+            assert np.allclose(mean, want_mean, rtol=1e-8, atol=1e-10)
+            assert np.allclose(cov, want_cov, rtol=1e-7, atol=1e-12)
+            assert ll == pytest.approx(est.log_evidence[k, m], rel=1e-9)
+    alpha = 0.5 * (est.alphas[3] + est.alphas[4])             # between two grid values
+    z = alpha * demo.t[idx]
+    mean, cov, ll = est.posterior_at(1, alpha)
+    assert ll == pytest.approx(_dense_evidence(model, 1, z, demo.observed[idx]), rel=1e-9)
+    do = model.n_observed_ * model.n_basis
+    A = np.kron(np.eye(model.n_observed_), model.basis_(z))
+    C = model.covariances_[1][:do, :do]
+    S = np.diag(np.repeat(model.observed_noise_var_, len(z))) + A @ C @ A.T
+    gain = C @ A.T @ np.linalg.inv(S)
+    assert np.allclose(mean, model.means_[1][:do] + gain @ (demo.observed[idx].T.ravel()
+                                                            - A @ model.means_[1][:do]))
+    assert np.allclose(cov, C - gain @ A @ C, atol=1e-10)
+    with pytest.raises(ValueError, match='alpha must be a positive number'):
+        est.posterior_at(0, -1.0)
+    with pytest.raises(ValueError, match='no observation absorbed'):
+        OnlineEstimator(model, n_alpha=3).posterior_at(0, 1.0)
+
+
+def test_refined_alpha_is_the_vertex_of_the_batch_log_posterior_parabola(model_and_demos):
+    model, demos, _ = model_and_demos
+    est = OnlineEstimator(model, n_alpha=15, min_interval=0.0)
+    demo = demos[25]
+    idx = np.arange(0, int(0.5 * len(demo.t)), 4)
+    for i in idx:
+        est.update(demo.t[i], demo.observed[i])
+    k, a = est.map_hypothesis()
+    m = int(np.argmin(np.abs(est.alphas - a)))
+    assert 0 < m < 14
+    batch = phase_posterior_batch(model, demo.t[idx], demo.observed[idx], est.alphas)[k]
+    x = est.alphas[m - 1:m + 2]
+    c2, c1, _ = np.polyfit(x - x[1], batch[m - 1:m + 2], 2)
+    refined = est.refined_alpha()
+    assert refined == pytest.approx(x[1] - c1 / (2 * c2), rel=1e-9)
+    assert abs(refined - a) <= 0.5 * (est.alphas[1] - est.alphas[0])
+    assert est.refined_alpha(k) == refined
+    # Before any observation, and at the ends of the grid: the grid value.
+    fresh = OnlineEstimator(model, n_alpha=15)
+    assert fresh.refined_alpha() == fresh.map_hypothesis()[1]
+
+
+def test_refined_alpha_from_a_coarse_grid_is_nearer_the_fine_grid_map_than_the_coarse_map():
+    """Sampled demonstrations of one pattern, durations 1-2 s: after 40 % the coarse grid's
+    (15 values) MAP is off by up to half its step; the refined alpha is within a few % of a
+    step of a 2000-value grid's MAP."""
+    rng = np.random.default_rng(11)
+    from mixture_ip_ros.core.basis import GaussianBasis
+    b = GaussianBasis(10)
+    zc = b.centers
+    mean = np.concatenate([np.sin(2.5 * zc), 0.6 * np.cos(3 * zc) - 0.3])
+    cov = random_spd(rng, 20, 0.002, rank=4)
+
+    def demo():
+        w = rng.multivariate_normal(mean, cov)
+        t, Y = sample_trajectory(b, w, 2, rng.uniform(1.0, 2.0), noise=0.002, rng=rng)
+        return Demonstration(t, Y)
+    model = MixtureIProMP(1, n_basis=10).fit([demo() for _ in range(20)])
+    coarse_err, refined_err = [], []
+    for _ in range(10):
+        d = demo()
+        coarse = OnlineEstimator(model, n_alpha=15, min_interval=0.0)
+        fine = OnlineEstimator(model, n_alpha=2000, min_interval=0.0)
+        for t, y in zip(d.t[:int(0.4 * len(d.t)):3], d.observed[:int(0.4 * len(d.t)):3]):
+            coarse.update(t, y)
+            fine.update(t, y)
+        step = coarse.alphas[1] - coarse.alphas[0]
+        best = fine.map_hypothesis()[1]
+        coarse_err.append(abs(coarse.map_hypothesis()[1] - best) / step)
+        refined_err.append(abs(coarse.refined_alpha() - best) / step)
+    assert np.mean(refined_err) < 0.1 * np.mean(coarse_err) and max(refined_err) < 0.05
+
+
+def test_end_posterior_is_the_batch_posterior_with_the_phase_known(model_and_demos):
+    """Once the end time T is known the phase is 1 there: p(k | D, T) is eq. 11 with z = t / T
+    and alpha = 1/T's evidence p(alpha | k), against dense conditioning."""
+    model, demos, _ = model_and_demos
+    est = OnlineEstimator(model, n_alpha=10, min_interval=0.05)
+    demo = demos[30]
+    used = [i for i, (t, y) in enumerate(zip(demo.t, demo.observed)) if est.update(t, y)]
+    T = demo.duration
+    lp = np.array([np.log(model.weights_[k])
+                   + norm(model.alpha_mean_[k], model.alpha_std_[k]).logpdf(1 / T)
+                   + _dense_evidence(model, k, demo.t[used] / T, demo.observed[used])
+                   for k in range(3)])
+    want = np.exp(lp - logsumexp(lp))
+    assert np.allclose(est.end_posterior(T), want, rtol=1e-8, atol=1e-12)
+    assert np.allclose(est.end_posterior(T), model.component_posterior(
+        demo.t[used] / T, demo.observed[used], alpha=1 / T), rtol=1e-12)
+    # A later end: the samples sit earlier in the movement.
+    lp_later = [np.log(model.weights_[k])
+                + norm(model.alpha_mean_[k], model.alpha_std_[k]).logpdf(1 / (1.2 * T))
+                + _dense_evidence(model, k, demo.t[used] / (1.2 * T), demo.observed[used])
+                for k in range(3)]
+    assert np.allclose(est.end_posterior(1.2 * T), np.exp(lp_later - logsumexp(lp_later)),
+                       rtol=1e-8, atol=1e-12)
+    with pytest.raises(ValueError, match='at or after the last sample absorbed'):
+        est.end_posterior(0.5 * T)
+    with pytest.raises(ValueError, match='no observation absorbed'):
+        OnlineEstimator(model, n_alpha=3).end_posterior(1.0)
+    est.reset()
+    with pytest.raises(ValueError, match='no observation absorbed'):
+        est.end_posterior(T)

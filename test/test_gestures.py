@@ -7,7 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from mixture_ip_ros.app.evaluation import decimated_rows, evaluate
+from mixture_ip_ros.app.evaluation import (decimated_rows, evaluate, online_component_given_end,
+                                           phase_known_components)
 from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.scenarios.synthetic import mixture_demos
@@ -53,6 +54,15 @@ def test_gesture_evaluation_reports_every_method_on_the_same_split(quick_gesture
         m['supervised_accuracy_by_fraction'])
     assert set(m['supervised_accuracy_phase_known_without_duration_by_fraction']) == set(
         m['supervised_accuracy_by_fraction'])
+    # Once the end time is known the phase is 1 there: the online estimator's posterior given
+    # the end is the phase-known posterior of the whole recording.
+    for who in ('supervised', 'unsupervised'):
+        assert m[f'{who}_accuracy_given_end'] == m[f'{who}_accuracy_phase_known_by_fraction']['1']
+    assert 0 <= ref['unsupervised_accuracy_given_end'] <= 1
+    # The completion criterion's curve from the same fits, reported beside the choice.
+    comp = sel['completion']
+    assert comp['chosen'] in sel['candidates'] and len(comp['mean_nats']) == 6
+    assert isinstance(comp['clear_optimum'], bool) and 'not used' in comp['criterion']
     # Labels never reach the unsupervised fit: every training gesture is in one component.
     assert np.sum(m['clusters_vs_labels']['counts']) == 20
     assert json.loads((out / 'metrics.json').read_text()) == m
@@ -93,3 +103,12 @@ def test_phase_known_sees_the_samples_the_online_estimator_absorbs():
         est = OnlineEstimator(model, min_interval=min_interval)
         used = [i for i, ti in enumerate(t) if est.update(ti, [0.0])]
         assert decimated_rows(t, min_interval).tolist() == used
+
+
+def test_online_component_given_the_end_is_the_phase_known_component_of_the_whole_movement():
+    demos = mixture_demos(seed=4, n_obs=1, n_ctrl=0, n_basis=6)[0]
+    model = MixtureIProMP(3, n_basis=6).fit(demos[::2])
+    for d in demos[1::2]:
+        for min_interval in (0.0, 0.05):
+            assert online_component_given_end(model, d, 20, min_interval) == \
+                phase_known_components(model, d, [1.0], min_interval)[0]

@@ -5,14 +5,16 @@
   posture vs the demonstrated one) from the final wrist position; beyond the thesis, the same
   online: the OnlineEstimator fed the first x % of the held-out wrist stream, phase unknown.
 - pole (3.4.1, Figs. 7-8): leave-one-out RMS vs K; flange paths of one Gaussian vs the mixture.
-- phase (4.3.1, Figs. 19, 26-27): RMS of the completed letter vs observed fraction, alpha estimate.
+- phase (4.3.1, Figs. 19, 26-27): RMS of the completed letter vs observed fraction, alpha estimate
+  (the MAP between the online estimator's grid values).
 - missing_data (4.3.2, Figs. 36-37, 42-43): EM vs per-trajectory regression from training letters
   with a block of 180 missing samples; EM log-likelihood per iteration.
 - gestures (real human motion, beyond the thesis): PickupGestureWiimoteZ (scenarios.gestures), a
   single-agent set: who made the gesture, from the first 30/50/70/100 % of it, by the
   unsupervised mixture (K by held-out log-likelihood at calibrated covariance floors, components
   named by majority over the training labels), phase unknown (online) and known (the same
-  samples); by the supervised mixture (one component per class); and baselines on the same
+  samples), and online once the end time is given (the phase is 1 there); by the supervised
+  mixture (one component per class); and baselines on the same
   split in the same run: a per-class ProMP, scikit-learn's GaussianMixture on the same ridge
   weights, 1-NN DTW.
 
@@ -237,11 +239,12 @@ def majority_labels(model, demos):
 
 def observed_prediction(est: OnlineEstimator, t, with_cov: bool = False):
     """The observed agent's predicted path at times ``t`` under the MAP (k, alpha), as the thesis
-    completes a letter: z = alpha* t, clamped to [0, 1]. Returns (mean, per-time cov or None,
-    alpha*)."""
-    k, a = est.map_hypothesis()
-    m = int(np.argmin(np.abs(est.alphas - a)))
-    mu, sig = est.observed_weights(k, m)
+    completes a letter: z = alpha* t, clamped to [0, 1], with alpha* the MAP between grid values
+    (OnlineEstimator.refined_alpha) and the weights' posterior at it. Returns (mean, per-time
+    cov or None, alpha*)."""
+    k = est.map_hypothesis()[0]
+    a = est.refined_alpha(k)
+    mu, sig, _ = est.posterior_at(k, a)
     z = np.clip(a * np.asarray(t, dtype=float), 0.0, 1.0)
     if not with_cov:
         basis = est.model.basis_
@@ -624,6 +627,16 @@ def online_components(model, demo, fractions, n_alpha=50, min_interval=0.05):
     return out
 
 
+def online_component_given_end(model, demo, n_alpha=50, min_interval=0.05):
+    """The most probable component once the online estimator has been fed the whole of ``demo``
+    sample by sample (phase unknown) and is told when it ended (the observer's 'end' event, at
+    its last sample): OnlineEstimator.end_posterior, where the phase is 1."""
+    est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval)
+    rows = np.flatnonzero(~np.isnan(demo.observed).any(axis=1))
+    _feed_until(est, demo, rows, 0, demo.duration)
+    return int(np.argmax(est.end_posterior(float(demo.t[rows[-1]]))))
+
+
 def decimated_rows(t, min_interval):
     """Indices of the samples the online estimator absorbs from times ``t``: the first, then
     each one at least ``min_interval`` after the last one absorbed (OnlineEstimator.admit)."""
@@ -734,7 +747,8 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
     afterwards.
     """
     from mixture_ip_ros.viz import plots
-    from mixture_ip_ros.core.mixture import calibrated_heldout_loglik, selection_curve
+    from mixture_ip_ros.core.mixture import (COMPLETION_FRACTIONS, calibrated_heldout_curves,
+                                             selection_curve)
     config = config or gesture_config()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -756,10 +770,15 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
     # (labels unused); the model is fitted with the chosen K and floor, as training does.
     t0 = time.perf_counter()
     candidates = [int(k) for k in config.candidates if k <= len(train) - len(train) // 5]
-    cal = calibrated_heldout_loglik(train, candidates, n_folds=5, fold_seed=seed,
-                                    **{'method': 'regression', **params})
+    curves = calibrated_heldout_curves(train, candidates, n_folds=5, fold_seed=seed,
+                                       **{'method': 'regression', **params})
+    cal = curves['loglik']
     ll = cal['scores']
     curve = selection_curve(ll, higher_is_better=True, paired=True)
+    # Reported beside it, not used: the completion criterion from the same fits (what a model
+    # of one agent is for; bench/selection_curves.py: less reliable on sampled sets).
+    completion = selection_curve(curves['completion']['scores'], higher_is_better=True,
+                                 paired=True)
     K = candidates[curve['index']]
     floor = cal['prior_scale'][curve['index']]
     model = MixtureIProMP(n_components=K, random_state=seed,
@@ -776,6 +795,11 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
                      y_test)
     unsup_known = accuracy([[names[k] for k in phase_known_components(
         model, d, fractions, config.min_interval)] for d in test], y_test)
+
+    def accuracy_given_end(mod, labels):
+        return float(np.mean([labels[online_component_given_end(
+            mod, d, config.n_alpha, config.min_interval)] == y for d, y in zip(test, y_test)]))
+    unsup_end = accuracy_given_end(model, names)
     timings['unsupervised_test_s'] = round(time.perf_counter() - t0, 2)
 
     # Supervised: one component per class, tied noise and one covariance prior for all.
@@ -788,6 +812,7 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
                    y_test)
     sup_known = accuracy([[cls[k] for k in phase_known_components(
         sup_model, d, fractions, config.min_interval)] for d in test], y_test)
+    sup_end = accuracy_given_end(sup_model, cls)
     # What knowing the phase adds besides the duration: the same without p(alpha | k).
     sup_shape = accuracy([[cls[k] for k in phase_known_components(
         sup_model, d, fractions, config.min_interval, duration=False)] for d in test], y_test)
@@ -813,6 +838,7 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
     ref_names = majority_labels(ref, train)
     ref_acc = accuracy([[ref_names[k] for k in online_components(
         ref, d, fractions, config.n_alpha, config.min_interval)] for d in test], y_test)
+    ref_end = accuracy_given_end(ref, ref_names)
     ref_gmm, _ = sklearn_gmm_accuracy(W_train, y_train, W_test, y_test, Kc,
                                       seeds=range(seed, seed + 10))
     timings['reference_k_classes_s'] = round(time.perf_counter() - t0, 2)
@@ -830,10 +856,13 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
         {'mixture, unsupervised, phase unknown (online)': [unsup[k] for k in keys],
          'mixture, unsupervised, phase known': [unsup_known[k] for k in keys],
          'mixture, supervised, phase unknown (online)': [sup[k] for k in keys],
+         'mixture, supervised, phase known': [sup_known[k] for k in keys],
          'per-class ProMP (baseline), phase known': [promp_acc[k] for k in keys]},
         {f'scikit-learn GMM, K = {K}': gmm_acc, '1-NN DTW': dtw_acc},
         f'PickupGestureWiimoteZ: who made the gesture ({len(classes)} people, '
-        f'{len(test)} test gestures)', chance=chance)
+        f'{len(test)} test gestures)', chance=chance,
+        points={'mixture, supervised, online, then the end time given': (1.0, sup_end),
+                'mixture, unsupervised, online, then the end time given': (1.0, unsup_end)})
     plots.clusters_vs_labels(out_dir / 'gestures_clusters_vs_labels.png', counts,
                              [n or '-' for n in names], classes,
                              f'Unsupervised mixture, K = {K}: training gestures per component')
@@ -847,6 +876,8 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
         'supervised_accuracy_by_fraction': sup,
         'supervised_accuracy_phase_known_by_fraction': sup_known,
         'supervised_accuracy_phase_known_without_duration_by_fraction': sup_shape,
+        'unsupervised_accuracy_given_end': unsup_end,
+        'supervised_accuracy_given_end': sup_end,
         'baseline_promp_accuracy_by_fraction': promp_acc,
         'baseline_sklearn_gmm_accuracy': gmm_acc,
         'baseline_dtw_accuracy': dtw_acc,
@@ -855,12 +886,22 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
                         'candidates': candidates, 'mean_nats': curve['mean'],
                         'se_nats': curve['se'], 'prior_scale': cal['prior_scale'],
                         'prior_scale_selected': floor,
-                        'clear_optimum': curve['clear'], 'note': curve['note']},
+                        'clear_optimum': curve['clear'], 'note': curve['note'],
+                        'completion': {
+                            'criterion': 'predictive log density of the rest of a held-out '
+                                         'gesture given its beginning (z <= f), mean over f = '
+                                         + ', '.join(f'{f:g}' for f in COMPLETION_FRACTIONS)
+                                         + '; reported, not used for the choice',
+                            'chosen': candidates[completion['index']],
+                            'mean_nats': completion['mean'], 'se_nats': completion['se'],
+                            'prior_scale': curves['completion']['prior_scale'],
+                            'clear_optimum': completion['clear'], 'note': completion['note']}},
         'component_labels': names,
         'clusters_vs_labels': {'classes': classes, 'counts': counts.tolist()},
         'baseline_sklearn_gmm_seed': gmm_seed,
         'reference_k_classes': {'n_components': Kc,
                                 'unsupervised_accuracy_by_fraction': ref_acc,
+                                'unsupervised_accuracy_given_end': ref_end,
                                 'baseline_sklearn_gmm_accuracy': ref_gmm},
         'chance_accuracy': chance,
         'n_train': len(train), 'n_test': len(test), 'n_classes': len(classes),
@@ -870,6 +911,10 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
         'noise_var': np.asarray(model.noise_var_).tolist(),
         'units': {'accuracy': 'fraction of test gestures whose person is named correctly',
                   'fractions': 'part of the recording observed (from its first sample)',
+                  'given_end': 'the whole recording fed to the online estimator (phase '
+                               'unknown), then its end time given, where the phase is 1 '
+                               '(OnlineEstimator.end_posterior); beside the same without '
+                               'the end, the "1" of the phase-unknown curves',
                   'noise_var': 'g^2'},
         'timings_s': timings,
         'config': config.to_dict(),

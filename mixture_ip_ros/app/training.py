@@ -146,7 +146,9 @@ def component_labels(model, demos):
     out = []
     for k in range(model.n_components):
         members = [lbl for lbl, r in zip(labels, model.resp_) if int(np.argmax(r)) == k]
-        out.append(max(set(members), key=members.count) if members else f'component_{k}')
+        # ties go to the first label in sorted order: the same names in every run
+        out.append(max(sorted(set(members), key=str), key=members.count) if members
+                   else f'component_{k}')
     return out
 
 

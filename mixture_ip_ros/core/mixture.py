@@ -167,10 +167,31 @@ class _Prepared(NamedTuple):
     n_observed: int
 
     def take(self, idx) -> '_Prepared':
-        st = self.stats
-        return _Prepared(ObservationStats(st.G[idx], st.b[idx], st.yy[idx], st.m[idx]),
-                         self.W[idx], self.sq[idx], self.alphas[idx], self.timing[idx],
-                         self.n_observed)
+        return _Prepared(_take_stats(self.stats, idx), self.W[idx], self.sq[idx],
+                         self.alphas[idx], self.timing[idx], self.n_observed)
+
+
+def _take_stats(st: ObservationStats, idx) -> ObservationStats:
+    """The stacked statistics (promp.stack_stats) of the trajectories ``idx``."""
+    return ObservationStats(st.G[idx], st.b[idx], st.yy[idx], st.m[idx])
+
+
+def _beginning_stats(basis, demos, fractions):
+    """Per fraction f, the stacked statistics of every demonstration's beginning: its samples
+    (every DOF of both agents) at phases z <= f."""
+    out = []
+    for f in fractions:
+        out.append(stack_stats([observation_stats(basis, d.phase[d.phase <= f],
+                                                  np.hstack([d.observed, d.controlled])[
+                                                      d.phase <= f]) for d in demos]))
+    return out
+
+
+def _checked_fractions(fractions):
+    f = np.atleast_1d(np.asarray(fractions, dtype=float))
+    if f.ndim != 1 or f.size == 0 or not np.all((f > 0) & (f < 1)):
+        raise ValueError(f'fractions must be numbers in (0, 1), got {fractions!r}')
+    return tuple(float(x) for x in f)
 
 
 class MixtureIProMP:
@@ -516,6 +537,66 @@ class MixtureIProMP:
             lp[:, k] += log_evidence(stats, self.means_[k], self.covariances_[k], noise[k])
         return _logsumexp_rows(lp)
 
+    def score_completion(self, demonstrations, fractions=None):
+        """How well the model predicts the rest of each demonstration from its beginning, the
+        phase known (z = t / T, so alpha = 1/T too), for every ``fraction`` f (default
+        COMPLETION_FRACTIONS): the beginning B is the samples at z <= f, the rest R those at
+        z > f, every DOF of both agents. Returns (log_density, rms), each (n, len(fractions)):
+
+        - log p(R | B, alpha) = log p(R, B, alpha) - log p(B, alpha) under the mixture (eq. 6
+          with eq. 21 and p(alpha | k)): the predictive density of the rest, each component
+          weighted by its posterior given the beginning (eq. 11);
+        - the RMS error of the rest predicted as the thesis predicts (eqs. 12-13): the most
+          probable component given B and alpha, conditioned on B, its mean at the rest's
+          phases; over every DOF of the rest in the DOF's own unit (comparable across K, not
+          across data sets).
+        """
+        self._check_fitted()
+        fractions = _checked_fractions(COMPLETION_FRACTIONS if fractions is None else fractions)
+        demos = list(demonstrations)
+        D = self.n_observed_ + self.n_controlled_
+        for demo in demos:
+            if demo.n_observed_dofs + demo.n_controlled_dofs != D:
+                raise ValueError(f'demonstration {demo.name!r} has {demo.n_observed_dofs} + '
+                                 f'{demo.n_controlled_dofs} DOFs; the model has '
+                                 f'{self.n_observed_} + {self.n_controlled_}')
+        full = stack_stats([observation_stats(self.basis_, d.phase,
+                                              np.hstack([d.observed, d.controlled]))
+                            for d in demos])
+        return self._completion_stats(full, _beginning_stats(self.basis_, demos, fractions),
+                                      np.array([1.0 / d.duration for d in demos]))
+
+    def _completion_stats(self, full: ObservationStats, beginnings, alphas):
+        """:meth:`score_completion` from stacked statistics of the whole demonstrations, of
+        their beginnings (one stack per fraction) and their alpha = 1/T."""
+        K, D = self.n_components, self.n_observed_ + self.n_controlled_
+        N = self.n_basis
+        n = len(alphas)
+        noise = np.broadcast_to(self.noise_var_, (K, D))
+        prior = np.log(self.weights_) + alpha_log_density(alphas, self.alpha_mean_,
+                                                          self.alpha_std_ ** 2)
+        whole = prior + np.column_stack([log_evidence(full, self.means_[k], self.covariances_[k],
+                                                      noise[k]) for k in range(K)])
+        log_whole = _logsumexp_rows(whole)
+        density = np.empty((n, len(beginnings)))
+        rms = np.empty((n, len(beginnings)))
+        for c, begin in enumerate(beginnings):
+            lp = prior.copy()
+            post = np.empty((K, n, D * N))
+            for k in range(K):
+                ll, post[k] = log_evidence(begin, self.means_[k], self.covariances_[k], noise[k],
+                                           posterior_means=True)
+                lp[:, k] += ll                                                  # eq. 11
+            density[:, c] = log_whole - _logsumexp_rows(lp)
+            w = post[np.argmax(lp, axis=1), np.arange(n)].reshape(n, D, N)     # eqs. 12-13
+            # The rest's statistics are the whole's minus the beginning's (sums over samples).
+            G, b = full.G - begin.G, full.b - begin.b
+            sq = (full.yy - begin.yy - 2 * np.einsum('ijn,ijn->ij', w, b)
+                  + np.einsum('ijn,ijnk,ijk->ij', w, G, w))
+            m = (full.m - begin.m).sum(axis=1)
+            rms[:, c] = np.sqrt(np.maximum(sq.sum(axis=1), 0.0) / np.maximum(m, 1.0))
+        return density, rms
+
     # --------------------------------------------------------- weight vectors (eqs. 6-7)
     def demonstration_weights(self, demonstrations):
         """The weight vectors that ``fit`` clusters: eq. 14 per demonstration and DOF (ridge),
@@ -659,19 +740,27 @@ def heldout_loglik_by_components(demonstrations, candidates, n_folds: int = 5, p
     """
     scale = params.pop('prior_scale', _DEFAULT_PRIOR_SCALE)
     return _heldout_scores(demonstrations, candidates, [scale], n_folds, progress, fold_seed,
-                           params)[0]
+                           params)['loglik'][0]
 
 
-def _heldout_scores(demonstrations, candidates, scales, n_folds, progress, fold_seed, params):
-    """Held-out log-likelihoods (len(scales), len(candidates), n): every fold's model is the
-    one ``MixtureIProMP(K, prior_scale=scale, **params).fit`` learns from the other folds,
-    scored on the fold. What each demonstration contributes on its own is computed once, and
-    each fold's k-means start of each K once for every scale (it does not depend on the
-    floor). ``progress(done, total, K)`` after each fit."""
+def _heldout_scores(demonstrations, candidates, scales, n_folds, progress, fold_seed, params,
+                    fractions=()):
+    """Held-out scores, each (len(scales), len(candidates), n): every fold's model is the one
+    ``MixtureIProMP(K, prior_scale=scale, **params).fit`` learns from the other folds, scored
+    on the fold. 'loglik': :meth:`MixtureIProMP.score_demonstrations`; with ``fractions`` also
+    'completion' and 'completion_rms', :meth:`MixtureIProMP.score_completion`'s two scores
+    averaged over the fractions. What each demonstration contributes on its own is computed
+    once, and each fold's k-means start of each K once for every scale (it does not depend on
+    the floor). ``progress(done, total, K)`` after each fit."""
     demos = list(demonstrations)
     fold = cv_folds(len(demos), n_folds, fold_seed)
     data = _prepare_for_cv(demos, params)
-    out = np.empty((len(scales), len(candidates), len(demos)))
+    shape = (len(scales), len(candidates), len(demos))
+    out = {'loglik': np.empty(shape)}
+    if fractions:
+        out['completion'], out['completion_rms'] = np.empty(shape), np.empty(shape)
+        beginnings = _beginning_stats(GaussianBasis(params.get('n_basis', _DEFAULT_N_BASIS)),
+                                      demos, _checked_fractions(fractions))
     done, total = 0, len(scales) * len(candidates) * (fold.max() + 1)
     for f in range(fold.max() + 1):
         train = data.take(fold != f)
@@ -684,7 +773,13 @@ def _heldout_scores(demonstrations, candidates, scales, n_folds, progress, fold_
                 if init is None and len(train.W) >= K:
                     init = model._initial_clusters(train)
                 model._fit_prepared(train, init=init)
-                out[b, a, test] = model._score_stats(test_stats, data.alphas[test])
+                out['loglik'][b, a, test] = model._score_stats(test_stats, data.alphas[test])
+                if fractions:
+                    density, rms = model._completion_stats(
+                        test_stats, [_take_stats(st, test) for st in beginnings],
+                        data.alphas[test])
+                    out['completion'][b, a, test] = density.mean(axis=1)
+                    out['completion_rms'][b, a, test] = rms.mean(axis=1)
                 done += 1
                 if progress:
                     progress(done, total, K)
@@ -696,6 +791,7 @@ def _heldout_scores(demonstrations, candidates, scales, n_folds, progress, fold_
 # optima range from 3e-4, smooth generated reaches, to 1, letters and sampled covariances).
 PRIOR_SCALES = tuple(float(f'{10.0 ** e:.3g}') for e in np.arange(0.5, -4.01, -0.5))
 _DEFAULT_PRIOR_SCALE = inspect.signature(MixtureIProMP).parameters['prior_scale'].default
+_DEFAULT_N_BASIS = inspect.signature(MixtureIProMP).parameters['n_basis'].default
 
 
 def calibrated_heldout_loglik(demonstrations, candidates, prior_scales=PRIOR_SCALES,
@@ -716,17 +812,47 @@ def calibrated_heldout_loglik(demonstrations, candidates, prior_scales=PRIOR_SCA
     log-likelihood at its best scale; 'prior_scale' (per candidate); 'prior_scales' and
     'mean_by_scale' (len(prior_scales), len(candidates)), the mean of every curve tried.
     """
+    return calibrated_heldout_curves(demonstrations, candidates, (), prior_scales, n_folds,
+                                     progress, fold_seed, **params)['loglik']
+
+
+# Where the completion criterion cuts a held-out demonstration into the beginning it observes
+# and the rest it predicts: the fractions recognition is reported at (app.evaluation), spread
+# over the movement so that no single cut decides.
+COMPLETION_FRACTIONS = (0.3, 0.5, 0.7)
+
+
+def calibrated_heldout_curves(demonstrations, candidates, fractions=COMPLETION_FRACTIONS,
+                              prior_scales=PRIOR_SCALES, n_folds: int = 5, progress=None,
+                              fold_seed=0, **params):
+    """Every held-out criterion for K from the same cross-validated fits, each K at the
+    covariance floor the criterion itself prefers (see :func:`calibrated_heldout_loglik`):
+
+    - 'loglik': log p(D_i, alpha_i) of the held-out demonstration (higher is better);
+    - with ``fractions``, the single-agent analogue of the thesis's leave-one-out of the
+      controlled agent, what a model of one agent's movements is used for (recognise a
+      movement and predict its rest from its beginning): 'completion', the predictive log
+      density of the rest given the beginning, log p(D_i[z > f] | D_i[z <= f], alpha_i),
+      and 'completion_rms', the RMS error of the rest predicted from the beginning (lower is
+      better), each averaged over the fractions f (:meth:`MixtureIProMP.score_completion`).
+
+    Returns {criterion: dict as calibrated_heldout_loglik returns}.
+    """
     demos = list(demonstrations)
     scales = [float(s) for s in prior_scales]
     if not scales or not all(np.isfinite(s) and s > 0 for s in scales):
         raise ValueError(f'prior_scales must be positive numbers, got {prior_scales!r}')
     params = {k: v for k, v in params.items() if k != 'prior_scale'}
-    S = _heldout_scores(demos, candidates, scales, n_folds, progress, fold_seed, params)
-    mean = S.mean(axis=2)
-    best = np.argmax(mean, axis=0)
-    return {'scores': S[best, np.arange(len(candidates))],
-            'prior_scale': [scales[b] for b in best], 'prior_scales': scales,
-            'mean_by_scale': mean}
+    scores = _heldout_scores(demos, candidates, scales, n_folds, progress, fold_seed, params,
+                             tuple(fractions))
+    out = {}
+    for name, S in scores.items():
+        mean = S.mean(axis=2)
+        best = np.argmin(mean, axis=0) if name == 'completion_rms' else np.argmax(mean, axis=0)
+        out[name] = {'scores': S[best, np.arange(len(candidates))],
+                     'prior_scale': [scales[b] for b in best], 'prior_scales': scales,
+                     'mean_by_scale': mean}
+    return out
 
 
 def select_n_components(scores, higher_is_better: bool = False, paired: bool = False):

@@ -18,6 +18,7 @@ from ._kalman import (W, basis_rows, compact_lanes, from_lanes, kalman_update, m
                       to_lanes, tri_index)
 from .interaction import trajectory_distribution
 from .phase import alpha_grid, alpha_log_prior
+from .promp import observation_stats, weight_posterior
 
 
 class OnlineEstimator:
@@ -41,6 +42,11 @@ class OnlineEstimator:
     dropped at each pruning, not what later evidence could have given it. ``absorb`` does not
     prune, so samples absorbed in any order and then pruned give one result. It must be below
     1 / (K M), so that the most probable hypothesis is kept.
+
+    Between and beyond the grid: the samples absorbed are kept (time and position, in the order
+    absorbed), so that a hypothesis the grid does not hold can be evaluated exactly when asked
+    (:meth:`posterior_at`): the MAP alpha between grid values (:meth:`refined_alpha`) and the
+    posterior once the movement's end time is known (:meth:`end_posterior`).
     """
 
     def __init__(self, model, n_alpha: int = 50, min_interval: float = 0.05,
@@ -98,6 +104,8 @@ class OnlineEstimator:
         self.pruned_mass = 0.0
         self.n_observations = 0
         self.n_skipped = 0
+        self._times = []        # the samples absorbed, in the order absorbed
+        self._values = []
         self.t_last = None      # time of the last observation used
         self.t_seen = None      # time of the last observation offered (used or skipped)
         self._joint = None      # p(k, alpha_m | D), computed with each update
@@ -158,6 +166,8 @@ class OnlineEstimator:
                                        self._alpha_index, self.alphas, float(t), basis.centers,
                                        basis.width, y, self._noise, self._prior, self._hyp, joint)
         self.n_observations += 1
+        self._times.append(float(t))
+        self._values.append(y.copy())           # the caller may reuse its buffer
         self._joint = joint.reshape(self.n_components, -1)
         self._joint.flags.writeable = False
 
@@ -286,6 +296,69 @@ class OnlineEstimator:
         if t is None:
             return 0.0
         return float(np.clip(self.map_hypothesis()[1] * t, 0.0, 1.0))
+
+    def posterior_at(self, component, alpha):
+        """Posterior N(mean, cov) of the observed agent's weights and log p(D | k, alpha) under
+        ``component`` k and any phase speed ``alpha`` > 0, from the samples absorbed (eqs.
+        17-18 in batch, z_i = alpha t_i): what the recursive state of a grid hypothesis holds,
+        for an alpha the grid does not hold. Raises ValueError before any observation."""
+        k = int(component)
+        if not 0 <= k < self.n_components:
+            raise ValueError(f'component must be in [0, {self.n_components}), got {component}')
+        if not (np.isfinite(alpha) and alpha > 0):
+            raise ValueError(f'alpha must be a positive number, got {alpha!r}')
+        if not self._times:
+            raise ValueError('no observation absorbed yet')
+        model = self.model
+        do = self.n_observed * self.n_basis
+        stats = observation_stats(model.basis_, float(alpha) * np.asarray(self._times),
+                                  np.asarray(self._values))
+        return weight_posterior(stats, model.means_[k][:do],
+                                linalg.cho_factor(model.covariances_[k][:do, :do], lower=True),
+                                model._observed_noise(k))
+
+    def refined_alpha(self, component=None) -> float:
+        """Eq. 20 between grid values: the MAP alpha of ``component`` (k* if None), the vertex
+        of the parabola through log p(alpha_m | D, k) at the grid's most probable value and its
+        two neighbours (exact where the log posterior is quadratic in alpha, as it is near its
+        peak; never more than half a grid step from the grid's MAP). The grid's own MAP at
+        either end of the grid, where a neighbour was pruned, or before any observation.
+
+        After part of a movement the posterior over alpha can be narrower than the grid step;
+        the grid then limits the phase, and a finer grid costs every update, this nothing."""
+        k = self._map_indices()[0] if component is None else int(component)
+        m = int(np.argmax(self.joint_posterior()[k]))
+        a = self.alphas
+        if not self._times or m == 0 or m == len(a) - 1:
+            return float(a[m])
+        M = len(a)
+        # log p(alpha_m | D, k) up to a constant, from the evidence (no underflow far out)
+        lp = (self._log_prior[k * M + m - 1:k * M + m + 2]
+              + self.log_evidence_flat[k * M + m - 1:k * M + m + 2])
+        if not np.all(np.isfinite(lp)):
+            return float(a[m])
+        curvature = lp[0] - 2.0 * lp[1] + lp[2]
+        if curvature >= 0.0:                # flat: no peak between the neighbours
+            return float(a[m])
+        # grid steps are equal (np.linspace); the vertex lies within half a step of a[m]
+        return float(a[m] + 0.5 * (lp[0] - lp[2]) / curvature * (a[m + 1] - a[m]))
+
+    def end_posterior(self, t_end: float):
+        """p(k | D, T = t_end): the component posterior once the movement's end time is known
+        (the observer's 'end' event, ``t_end`` s after onset), where its phase is 1, so
+        alpha = 1/t_end exactly: p(k) p(alpha | k) p(D | k, alpha) normalised over k (eqs. 11,
+        17-18 at that alpha; the Jacobian from T to alpha is the same for every k). This is the
+        batch posterior with the phase known (MixtureIProMP.component_posterior with alpha),
+        from the samples absorbed. Raises ValueError for a t_end before the last sample
+        absorbed."""
+        if not self._times:
+            raise ValueError('no observation absorbed yet')
+        if not (np.isfinite(t_end) and t_end >= max(self._times) and t_end > 0):
+            raise ValueError(f'the end time must be at or after the last sample absorbed '
+                             f'({max(self._times):g} s), got {t_end!r}')
+        alpha = 1.0 / float(t_end)
+        return self.model.component_posterior(alpha * np.asarray(self._times),
+                                              np.asarray(self._values), alpha=alpha)
 
     def observed_weights(self, k, m):
         """Posterior N(mean, cov) of the observed agent's weights under hypothesis (k, m).

@@ -119,7 +119,7 @@ def stack_stats(stats) -> ObservationStats:
                               for f in ('G', 'b', 'yy', 'm')))
 
 
-def log_evidence(stats: ObservationStats, mean, cov, noise_var) -> np.ndarray:
+def log_evidence(stats: ObservationStats, mean, cov, noise_var, posterior_means: bool = False):
     """Eq. 21, log p(D_i) = log N(y_i; A_i mu, R + A_i Sigma A_i^T), of every trajectory in
     ``stats`` (stacked, :func:`stack_stats`) under one weight Gaussian N(mean, Sigma = ``cov``)
     and per-DOF noise variances: the marginal likelihood of :func:`weight_posterior` for many
@@ -128,7 +128,8 @@ def log_evidence(stats: ObservationStats, mean, cov, noise_var) -> np.ndarray:
     P_i = Sigma^-1 + A^T R^-1 A. One batched Cholesky factorisation gives both: of P_i bordered
     by eta_i, [[P_i, eta_i], [eta_i^T, c_i]], whose last row is (L_i^-1 eta_i)^T; c_i only keeps
     the last pivot positive (c_i > eta_i^T P_i^-1 eta_i, which is below eta_i^T Sigma eta_i as
-    P_i >= Sigma^-1). Returns (n,)."""
+    P_i >= Sigma^-1). Returns (n,); with ``posterior_means`` also the posterior means of
+    eq. 27, mean + P_i^-1 eta_i = mean + L_i^-T (L_i^-1 eta_i), from the same factor (n, d)."""
     G, b, yy, m = stats.G, stats.b, stats.yy, stats.m
     n, D, N = b.shape
     d = D * N
@@ -156,8 +157,15 @@ def log_evidence(stats: ObservationStats, mean, cov, noise_var) -> np.ndarray:
     u = P[:, :d, d]                                                # L_i^-1 eta_i
     logdet_prec = 2 * np.log(np.diagonal(P[:, :d, :d], axis1=1, axis2=2)).sum(axis=1)
     logdet_prior = 2 * np.sum(np.log(np.diag(chol[0])))
-    return -0.5 * (m.sum(axis=1) * LOG_2PI + (m * np.log(noise_var)).sum(axis=1)
-                   + logdet_prior + logdet_prec + rr - np.einsum('ij,ij->i', u, u))
+    ll = -0.5 * (m.sum(axis=1) * LOG_2PI + (m * np.log(noise_var)).sum(axis=1)
+                 + logdet_prior + logdet_prec + rr - np.einsum('ij,ij->i', u, u))
+    if not posterior_means:
+        return ll
+    # L_i^T is the upper triangle of P_i[:d, :d] (row-major); its lower triangle still holds
+    # P_i, which the solve does not read.
+    post = np.array([linalg.solve_triangular(Pi[:d, :d], ui, lower=False, check_finite=False)
+                     for Pi, ui in zip(P, u)]).reshape(n, d)
+    return ll, post + np.asarray(mean, dtype=float).ravel()
 
 
 def expected_sq_residual(stats: ObservationStats, post_mean, post_cov):

@@ -22,9 +22,10 @@ def sample_trajectory(basis, w, n_dofs, T, dt=0.01, noise=0.0, rng=None):
 
 
 def mixture_demos(seed=0, counts=(12, 14, 10), n_obs=3, n_ctrl=4, n_basis=8, noise=0.002,
-                  durations=((1.2, 1.8), (1.5, 2.4), (1.0, 1.6))):
-    """Three interaction patterns: distinct mean weights, small within-pattern covariance,
-    durations varying within each pattern. Returns (demos, labels, basis, generating means)."""
+                  durations=((1.2, 1.8), (1.5, 2.4), (1.0, 1.6)), spread=0.002):
+    """Three interaction patterns: distinct mean weights, a within-pattern covariance of scale
+    ``spread`` (small by default: well separated patterns), durations varying within each
+    pattern. Returns (demos, labels, basis, generating means)."""
     rng = np.random.default_rng(seed)
     basis = GaussianBasis(n_basis)
     D = n_obs + n_ctrl
@@ -38,7 +39,7 @@ def mixture_demos(seed=0, counts=(12, 14, 10), n_obs=3, n_ctrl=4, n_basis=8, noi
         means.append(np.concatenate([offset[j] + slope[j] * z for j in range(D)]))
     demos, labels = [], []
     for k, c in enumerate(counts):
-        cov = random_spd(rng, d, 0.002, rank=6)
+        cov = random_spd(rng, d, spread, rank=6)
         for _ in range(c):
             w = rng.multivariate_normal(means[k], cov)
             T = rng.uniform(*durations[k])

@@ -336,10 +336,11 @@ def missing_data(path_rms, path_ll, path_recon, fractions, R_em, R_reg, ll, comp
     save_figure(fig, path_recon)
 
 
-def accuracy_vs_fraction(path, fractions, curves, levels, title, chance=None):
+def accuracy_vs_fraction(path, fractions, curves, levels, title, chance=None, points=None):
     """Accuracy of every method vs the fraction of the movement observed. ``curves``: {name:
     accuracies per fraction}; ``levels``: {name: one accuracy} of methods that see the whole
-    series (drawn as horizontal lines)."""
+    series (drawn as horizontal lines); ``points``: {name: (fraction, accuracy)}, single
+    results (drawn as stars)."""
     fig, ax = plt.subplots(figsize=(10.5, 4.6), constrained_layout=True)
     markers = 'osd^v<>'
     for i, (name, acc) in enumerate(curves.items()):
@@ -348,6 +349,9 @@ def accuracy_vs_fraction(path, fractions, curves, levels, title, chance=None):
     for j, (name, acc) in enumerate(levels.items()):
         ax.axhline(100 * acc, color=f'C{len(curves) + j}', ls='--', lw=1.5,
                    label=f'{name} (whole series)')
+    for j, (name, (f, acc)) in enumerate((points or {}).items()):
+        ax.plot([100 * f], [100 * acc], marker='*', ms=13, ls='none',
+                color=f'C{len(curves) + len(levels) + j}', label=name)
     if chance is not None:
         ax.axhline(100 * chance, color='0.6', ls=':', lw=1, label='chance')
     ax.set_xlabel('observed part of the movement [%]')
