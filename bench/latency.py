@@ -17,7 +17,7 @@ Set-up: a model trained on box_assembly(seed=0) (3 components, 15 basis function
 parameters from config/observer.yaml and config/estimator.yaml. The headline runs override
 min_interval = 0 (every observation used) and replan_rate_hz = 200 (every observation of a 100
 Hz stream replans in its own callback); *_deployed keeps config/estimator.yaml as it is. The
-stream replays demos' recorded 100 Hz wrist samples at their timing plus 0.3 s of rest, 0.5 s
+stream replays demos' recorded 100 Hz wrist samples at their timing plus 0.3 s of rest, 2.5 s
 apart, each stamped with the present when it is published. A short demo is replayed first as
 warm-up.
 
@@ -68,7 +68,11 @@ from mixture_ip_ros.robot.description import JOINT_NAMES  # noqa: E402
 from mixture_ip_ros.scenarios.generated import MOCAP_NOISE, box_assembly  # noqa: E402
 
 BIN = Path(sys.executable).parent
-GAP_S = 0.5                         # stamp and wall pause between replayed interactions
+# Stamp and wall pause between replayed interactions: a silence (the observer's 'gap'). Longer
+# than the observer's max_backdate (2 s), so that the dating of the next onset sees none of the
+# previous interaction's samples, which end elsewhere (core.segmentation fits the positions of
+# the last max_backdate seconds, across a gap too).
+GAP_S = 2.5
 REST_PAD_S = 0.3                    # extra rest after each demo so every end is confirmed
 STEADY_AFTER_S = 1.0                # poses this long after the onset event: steady state
 DRAIN_BOUND_MS = 50.0               # sustained: everything handled this soon after the last pose
