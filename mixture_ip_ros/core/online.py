@@ -351,11 +351,19 @@ class OnlineEstimator:
         basis = self.model.basis_
         g, lane = self._lane(k, m)
         mu_o = self._mu[g].reshape(-1, W)[:, lane]      # the mean only: no covariance built
-        controlled = mean_trajectory(self._controlled_mean(k, mu_o).reshape(-1, self.n_basis),
-                                     np.asarray(z_controlled, dtype=float), basis.centers,
-                                     basis.width, a)
+        # Only what is asked for (the estimator node asks for one agent at a time).
+        z_c = np.asarray(z_controlled, dtype=float)
+        if z_c.size:
+            controlled = mean_trajectory(self._controlled_mean(k, mu_o).reshape(
+                -1, self.n_basis), z_c, basis.centers, basis.width, a)
+        else:
+            controlled = tuple(np.zeros((0, self.model.n_controlled_)) for _ in range(3))
         z_o = np.asarray(z_observed, dtype=float)
-        observed = basis_rows(z_o, basis.centers, basis.width) @ mu_o.reshape(-1, self.n_basis).T
+        if z_o.size:
+            observed = (basis_rows(z_o, basis.centers, basis.width)
+                        @ mu_o.reshape(-1, self.n_basis).T)
+        else:
+            observed = np.zeros((0, self.n_observed))
         return k, a, controlled, observed
 
     def predict_at_rest(self, y_final, component=None):
