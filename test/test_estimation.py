@@ -945,3 +945,13 @@ def test_plan_checks_equal_their_numpy_statements():
                 assert scale == expected
                 verdicts.add('scaled' if scale > 1 else 'as is')
     assert len(verdicts) == 10, verdicts     # None, every problem, and all three outcomes
+
+
+def test_plan_phases_are_numpys_linspace():
+    from mixture_ip_ros.estimation.plans import _linspace
+    rng = np.random.default_rng(8)
+    for _ in range(2000):
+        start = rng.choice([rng.uniform(-2, 1), 0.0, 1.0 - 1e-17, 5e-324])
+        stop = rng.choice([1.0, start, rng.uniform(-3, 3)])
+        num = int(rng.integers(2, 60))
+        assert np.array_equal(_linspace(start, stop, num), np.linspace(start, stop, num))

@@ -27,6 +27,26 @@ PHASE_EPS = 1e-6
 MAX_TIME_SCALE = 4.0
 
 
+# The node plans in callbacks that follow a wait, where each distinct numpy call costs tens of
+# microseconds (bench/replan.py, 'after_sleep'): the phases and the checks of every plan are
+# compiled, one call each, with the values of the numpy statements they replace (tests).
+_F1, _F2 = numba.float64[:], numba.float64[:, :]
+
+
+@numba.njit(_F1(numba.float64, numba.float64, numba.int64), cache=True)
+def _linspace(start, stop, num):
+    """np.linspace(start, stop, num) for num >= 2, its operations elementwise (i step + start,
+    or (i / (num - 1)) delta + start when the step underflows to zero; the last one is stop)."""
+    div = num - 1
+    delta = stop - start
+    step = delta / div
+    y = np.empty(num)
+    for i in range(num):
+        y[i] = (i / div * delta if step == 0 else i * step) + start
+    y[num - 1] = stop
+    return y
+
+
 @dataclass(frozen=True)
 class PosteriorSummary:
     """What the estimator believes after an update: p(k | D) for every component, the MAP
@@ -113,7 +133,7 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
             final_time = t_now + max(lookahead, settle_time)
         times = np.array([float(final_time)])
     else:
-        phases = np.linspace(z_start, 1.0, n_points)
+        phases = _linspace(z_start, 1.0, n_points)
         times = phases / a
     # a: the grid value actually used (identical when it came from the grid)
     k, a, (pos, vel, acc), _ = estimator.mean_trajectories(phases, component=component, alpha=a)
@@ -137,7 +157,7 @@ def predicted_paths(estimator, n_points: int, components=None):
     """The whole predicted human movement (phases evenly spaced over 0..1) of each component
     under its MAP alpha: a list of (component, alpha, times (s since onset), positions
     (n_points, P)) for ``components`` (default: all)."""
-    phases = np.linspace(0.0, 1.0, n_points)
+    phases = _linspace(0.0, 1.0, n_points)
     out = []
     joint = estimator.joint_posterior()
     for k in (range(estimator.n_components) if components is None else components):
@@ -150,15 +170,12 @@ def predicted_paths(estimator, n_points: int, components=None):
 def predicted_wrist(estimator, plan: Plan, n_points: int):
     """The whole predicted human movement under the plan's hypothesis: times (s since onset)
     and positions (n_points, P) at phases evenly spaced over 0..1."""
-    phases = np.linspace(0.0, 1.0, n_points)
+    phases = _linspace(0.0, 1.0, n_points)
     _, a, _, positions = estimator.mean_trajectories((), phases, component=plan.component,
                                                      alpha=plan.alpha)
     return phases / a, positions
 
 
-# The checks of every plan in one compiled call each: the node runs them after a wait, where
-# each distinct numpy call costs tens of microseconds (bench/replan.py, 'after_sleep').
-_F1, _F2 = numba.float64[:], numba.float64[:, :]
 _PLAN_PROBLEMS = (None, 'non-finite times', 'non-finite positions', 'non-finite velocities',
                   'non-finite accelerations', 'times not strictly increasing (or negative)',
                   'last point not at rest')

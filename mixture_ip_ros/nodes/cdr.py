@@ -112,17 +112,22 @@ class _Encoder:
         self._layouts = {}
 
     def _buffers(self, n: int):
-        """A fresh copy of the payload template for ``n`` items, its uint32 and float64 views
-        (offsets in the index arrays count from the payload start, as CDR's alignment)."""
+        """The payload buffer for ``n`` items (the template: every encode writes all of its
+        variable fields), its uint32 and float64 views (offsets in the index arrays count from
+        the payload start, as CDR's alignment) and the index arrays."""
         layout = self._layouts.get(n)
         if layout is None:
-            layout = self._layouts[n] = self._layout(n)
-        template, index = layout
-        payload = bytearray(template)
-        size = len(payload)
-        u32 = np.frombuffer(payload, dtype=np.uint32, count=size // 4)
-        f64 = np.frombuffer(payload, dtype=np.float64, count=size // 8)
-        return payload, u32, f64, index
+            template, index = self._layout(n)
+            payload = np.frombuffer(bytearray(template), dtype=np.uint8)
+            size = len(template)
+            layout = self._layouts[n] = (
+                payload, payload[:size - size % 4].view(np.uint32),
+                payload[:size - size % 8].view(np.float64), index)
+        return layout
+
+    @staticmethod
+    def _message(payload) -> bytes:
+        return _ENCAPSULATION + payload.tobytes()
 
     def _layout(self, n: int):
         raise NotImplementedError
@@ -168,7 +173,7 @@ class JointTrajectoryEncoder(_Encoder):
         buf, u32, f64, (stamp, values, times) = self._buffers(n)
         if not _fill(u32, f64, values, values_in, stamp, stamp_ns, times, times_ns):
             raise _int32_error()
-        return _ENCAPSULATION + bytes(buf)
+        return self._message(buf)
 
 
 class PathEncoder(_Encoder):
@@ -199,7 +204,7 @@ class PathEncoder(_Encoder):
         buf, u32, f64, (stamp, stamps, xyz) = self._buffers(stamps_ns.shape[0])
         if not _fill(u32, f64, xyz, (positions,), stamp, stamp_ns, stamps, stamps_ns):
             raise _int32_error()
-        return _ENCAPSULATION + bytes(buf)
+        return self._message(buf)
 
 
 class Float64MultiArrayEncoder(_Encoder):
@@ -230,4 +235,4 @@ class Float64MultiArrayEncoder(_Encoder):
             raise ValueError(f'data must be one-dimensional, got shape {data.shape}')
         buf, _, f64, first = self._buffers(data.shape[0])
         f64[first:first + data.shape[0]] = data
-        return _ENCAPSULATION + bytes(buf)
+        return self._message(buf)
