@@ -159,6 +159,8 @@ def bench_node(seconds: float):
     ctx, listener, executor, received = _ros_listener(150 + os.getpid() % 40)
     try:
         node = SimNode(context=ctx, parameter_overrides=[Parameter('real_time_factor', value=0.0)])
+        if not node.start():       # a managed node: configure and activate
+            raise RuntimeError(f'sim_node: {node.refusal}')
         executor.add_node(node)
         sim, wall, count, gap = _measure(executor, received, seconds, lambda: node.sim.time)
         executor.shutdown()
