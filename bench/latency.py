@@ -17,7 +17,7 @@ Set-up: a model trained on box_assembly(seed=0) (3 components, 15 basis function
 parameters from config/observer.yaml and config/estimator.yaml. The headline runs override
 min_interval = 0 (every observation used) and replan_rate_hz = 200 (every observation of a 100
 Hz stream replans in its own callback); *_deployed keeps config/estimator.yaml as it is. The
-stream replays demos' recorded 100 Hz wrist samples at their timing plus 0.3 s of rest, 0.5 s
+stream replays demos' recorded 100 Hz wrist samples at their timing plus 0.3 s of rest, 2.5 s
 apart, each stamped with the present when it is published. A short demo is replayed first as
 warm-up.
 
@@ -27,7 +27,14 @@ relay_ms_{median,p99,max}[_cross_process], e2e_over_relay_{median,p99}[_cross_pr
 from the same run), estimator_{update,plan}_us_{mean,max} (the node's own statistics),
 sustained_hz (highest rate, with every lower one, at which no pose or observation was lost and
 the pipeline drained within 50 ms of the last pose).
+
+Scaling (key ``scaling``, in-process, every pose replanned): the same stream through models of
+K = 3, 6, 12 components (box assembly fitted with that K) with M = 50, 100 phase-speed
+hypotheses each (n_alpha): per (K, M) e2e_ms_{median,p99}, n_samples and the node's own
+estimator_{update,plan}_us_mean; relay_ms_{median,p99} from relay runs interleaved with them
+(one per K). bench/estimator.py gives the update alone on the same grid.
 Run: .venv/bin/python bench/latency.py [--demos 4] [--repeats 3] [--rates 250,500,1000,2000]
+[--no-scaling]
 Timing only, no assertions.
 """
 
@@ -68,11 +75,17 @@ from mixture_ip_ros.robot.description import JOINT_NAMES  # noqa: E402
 from mixture_ip_ros.scenarios.generated import MOCAP_NOISE, box_assembly  # noqa: E402
 
 BIN = Path(sys.executable).parent
-GAP_S = 0.5                         # stamp and wall pause between replayed interactions
+# Stamp and wall pause between replayed interactions: a silence (the observer's 'gap'). Longer
+# than the observer's max_backdate (2 s), so that the dating of the next onset sees none of the
+# previous interaction's samples, which end elsewhere (core.segmentation fits the positions of
+# the last max_backdate seconds, across a gap too).
+GAP_S = 2.5
 REST_PAD_S = 0.3                    # extra rest after each demo so every end is confirmed
 STEADY_AFTER_S = 1.0                # poses this long after the onset event: steady state
 DRAIN_BOUND_MS = 50.0               # sustained: everything handled this soon after the last pose
 EVERY_POSE = {'min_interval': 0.0, 'replan_rate_hz': 200.0}
+SCALING_COMPONENTS = (3, 6, 12)
+SCALING_ALPHAS = (50, 100)
 OBSERVER_YAML = config_path('observer.yaml')
 ESTIMATOR_YAML = config_path('estimator.yaml')
 
@@ -478,6 +491,27 @@ def run_sustained(domain, model_path, warm, g, rates, overrides=None):
     return best, runs
 
 
+# ---------------------------------------------------------------------------- scaling
+def run_scaling(domain, warm, stream, demos, model_3, tmp):
+    """Per (K, M) one in-process run of the nodes, every pose replanned; a relay run per K."""
+    out, relay = {}, []
+    for K in SCALING_COMPONENTS:
+        path = model_3
+        if K != 3:
+            path = Path(tmp) / f'box_model_K{K}.npz'
+            train_to_file(demos, path, n_components=K)
+        for M in SCALING_ALPHAS:
+            keys, _, st = run_in_process(domain, warm, stream, path, {**EVERY_POSE, 'n_alpha': M})
+            out[f'K{K}_M{M}'] = {
+                'hypotheses': K * M, 'e2e_ms_median': keys['e2e_ms_median'],
+                'e2e_ms_p99': keys['e2e_ms_p99'], 'n_samples': keys['n_samples'],
+                'estimator_update_us_mean': round(st['estimator_update_us_mean'], 1),
+                'estimator_plan_us_mean': round(st['estimator_plan_us_mean'], 1)}
+        relay += run_in_process(domain, warm, stream)[1]
+    out.update({k: v for k, v in ms_stats(relay, 'relay_ms').items() if 'max' not in k})
+    return out
+
+
 # ---------------------------------------------------------------------------- main
 def relay_main(which):
     rclpy.init()
@@ -499,6 +533,7 @@ def main():
     ap.add_argument('--repeats', type=int, default=3,
                     help='in-process runs (nodes and relays, interleaved) pooled')
     ap.add_argument('--rates', default='250,500,1000,2000', help='sustained: mocap rates (Hz)')
+    ap.add_argument('--no-scaling', action='store_true', help='skip the K x M scaling runs')
     ap.add_argument('--domain-id', type=int, default=None,
                     help='ROS domain id (default: private, from the pid)')
     ap.add_argument('--relay', choices=['pose', 'trajectory'], help=argparse.SUPPRESS)
@@ -512,7 +547,8 @@ def main():
     with tempfile.TemporaryDirectory(prefix='latency_bench_') as tmp:
         gen = box_assembly(seed=0)
         model_path = Path(tmp) / 'box_model.npz'
-        train_to_file([g.to_demonstration(0.01) for g in gen], model_path, n_components=3)
+        demos = [g.to_demonstration(0.01) for g in gen]
+        train_to_file(demos, model_path, n_components=3)
         warm_demo = min(gen, key=lambda g: g.duration)
         chosen = [next(g for g in gen if g.label == label and g is not warm_demo)
                   for label in ('plate', 'screw', 'screwdriver')]
@@ -574,6 +610,8 @@ def main():
             domain, model_path, warm, g_sus, rates)
         result['sustained_hz_replan_every_obs'], _ = run_sustained(
             domain, model_path, warm, g_sus, rates[:3], EVERY_POSE)
+        if not args.no_scaling:
+            result['scaling'] = run_scaling(domain, warm, stream, demos, model_path, tmp)
     result['latency_config'] = {**EVERY_POSE, 'n_points': ESTIMATOR_PARAMS['n_points'],
                                 'lookahead': ESTIMATOR_PARAMS['lookahead']}
     result['domain_id'] = domain

@@ -5,7 +5,7 @@ Prints one JSON object:
   step_us_total        wall microseconds per 1 ms control step (from the same runs)
   step_us_mujoco       of which mj_step
   step_us_pinocchio    of which the controller (Pinocchio RNEA + the control law around it)
-  step_us_trajectory   of which the trajectory sampling
+  step_us_trajectory   of which the trajectory sampling (references evaluated per block)
   step_us_rnea         Pinocchio's RNEA call alone
   node_realtime_factor sim_node in-process (simulated time, as fast as possible), spun by one
                        executor together with a JointState subscriber
@@ -34,6 +34,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 import pinocchio  # noqa: E402
 
+from mixture_ip_ros.robot.controller import _acceleration, _clip_into  # noqa: E402
 from mixture_ip_ros.robot.description import JOINT_NAMES  # noqa: E402
 from mixture_ip_ros.robot.sim import RobotSimulation  # noqa: E402
 from mixture_ip_ros.robot.trajectory import points_from_arrays  # noqa: E402
@@ -64,24 +65,32 @@ def bench_library(runs: int, seconds: float):
         sim.step(n)
         factors.append(seconds / (time.perf_counter() - start))
 
-    # The same loop as RobotSimulation.step, with a stopwatch around each part.
+    # The same loop as RobotSimulation.step and ComputedTorqueController.follow, with a
+    # stopwatch around each part.
     sim.set_state(Q_A)
     sim.set_trajectory(JOINT_NAMES, _min_jerk_points(Q_A, Q_B, seconds))
-    model, data = sim.model, sim.data
+    model, data, ctl = sim.model, sim.data, sim.controller
     clock = time.perf_counter
     t_traj = t_ctrl = t_mj = 0.0
     q, qd, ctrl = data.qpos, data.qvel, data.ctrl
-    for _ in range(n):
+    a = np.empty(7)
+    left = n
+    while left > 0:
         t0 = clock()
-        ref = sim.follower.sample(data.time, q, qd)
-        t1 = clock()
-        ctrl[:] = sim.controller.compute(q, qd, *ref)
-        t2 = clock()
-        mujoco.mj_step(model, data)
-        t3 = clock()
-        t_traj += t1 - t0
-        t_ctrl += t2 - t1
-        t_mj += t3 - t2
+        refs = sim.follower.references(data.time, sim.dt, left, q, qd)
+        t_traj += clock() - t0
+        errors = np.empty((len(refs), 7))
+        for k in range(len(refs)):
+            t1 = clock()
+            _acceleration(refs, k, q, qd, ctl.kp, ctl.kd, a, errors)
+            tau = pinocchio.rnea(ctl._model, ctl._data, q, qd, a)
+            _clip_into(tau, ctl._neg_limit, ctl.effort_limit, ctrl)
+            t2 = clock()
+            mujoco.mj_step(model, data)
+            t3 = clock()
+            t_ctrl += t2 - t1
+            t_mj += t3 - t2
+        left -= len(refs)
     # Pinocchio's RNEA call alone (part of step_us_pinocchio).
     pin_model = sim.controller_kinematics.model
     pin_data = pin_model.createData()
@@ -150,6 +159,8 @@ def bench_node(seconds: float):
     ctx, listener, executor, received = _ros_listener(150 + os.getpid() % 40)
     try:
         node = SimNode(context=ctx, parameter_overrides=[Parameter('real_time_factor', value=0.0)])
+        if not node.start():       # a managed node: configure and activate
+            raise RuntimeError(f'sim_node: {node.refusal}')
         executor.add_node(node)
         sim, wall, count, gap = _measure(executor, received, seconds, lambda: node.sim.time)
         executor.shutdown()

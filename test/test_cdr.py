@@ -7,9 +7,11 @@ from nav_msgs.msg import Path
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from mixture_ip_ros.nodes.cdr import JointTrajectoryEncoder, PathEncoder
+from mixture_ip_ros.nodes.cdr import (Float64MultiArrayEncoder, JointTrajectoryEncoder,
+                                      PathEncoder)
 
 NS = 1_000_000_000
 
@@ -102,3 +104,18 @@ def test_negative_and_extreme_times_and_bad_shapes():
         enc.encode(0, [0, 1], np.zeros((2, 1)), v, v)     # would broadcast
     with pytest.raises(ValueError, match='shape'):
         PathEncoder('w').encode(0, [0, 1], np.zeros((1, 3)))
+
+
+@pytest.mark.parametrize('label', ['p0,p1,p2,alpha,phase,confidence,component', 'ab', ''])
+@pytest.mark.parametrize('n', [0, 1, 2, 7, 16])
+def test_float64_multi_array_matches_rclpy(label, n):
+    data = np.random.default_rng(n).normal(size=n) * 1e5
+    ref = Float64MultiArray()
+    ref.layout.dim = [MultiArrayDimension(label=label, size=n, stride=n)]
+    ref.data = data.tolist()
+    enc = Float64MultiArrayEncoder(label)
+    assert deserialize_message(enc.encode(data), Float64MultiArray) == ref
+    assert deserialize_message(enc.encode(-data), Float64MultiArray).data.tolist() == \
+        (-data).tolist()
+    with pytest.raises(ValueError, match='one-dimensional'):
+        enc.encode(data.reshape(1, -1))

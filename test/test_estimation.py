@@ -879,3 +879,80 @@ def test_poses_lost_before_the_observer_are_counted_from_the_stamps():
         assert obs.on_pose(int(stamps[i]), 'world', (0.2, 0.1, 1.0), q, now_ns=1).rejected is None
     assert obs.period == pytest.approx(period * 1e-9, rel=0.05)
     assert obs.counts.missing == pytest.approx((kept[-1] + 1) - len(kept), rel=0.02)
+
+
+def _check_plan_numpy(plan):
+    """check_plan as numpy statements (the oracle of its compiled form)."""
+    for name in ('times', 'positions', 'velocities', 'accelerations'):
+        if not np.isfinite(getattr(plan, name)).all():
+            return f'non-finite {name}'
+    ns = np.round(plan.times * 1e9)
+    if ns[0] < 0 or (ns[1:] <= ns[:-1]).any():
+        return 'times not strictly increasing (or negative)'
+    if plan.velocities[-1].any() or plan.accelerations[-1].any():
+        return 'last point not at rest'
+    return None
+
+
+def _limit_numbers_numpy(plan, limits):
+    """within_limits' numbers as numpy statements: (first joint beyond its positions, its worst
+    position) or the time scale."""
+    low, high = plan.positions < limits.lower, plan.positions > limits.upper
+    if low.any() or high.any():
+        j = int(np.flatnonzero((low | high).any(axis=0))[0])
+        return j, (plan.positions[:, j].min() if low[:, j].any()
+                   else plan.positions[:, j].max())
+    return max(1.0, float(np.max(np.abs(plan.velocities) / limits.velocity)),
+               float(np.sqrt(np.max(np.abs(plan.accelerations) / limits.acceleration))))
+
+
+def test_plan_checks_equal_their_numpy_statements():
+    """check_plan and within_limits on random plans with every kind of fault, against the
+    numpy statements they compile: the same verdicts, joints, worst positions and scales."""
+    from mixture_ip_ros.estimation.plans import JointLimits, within_limits
+    rng = np.random.default_rng(5)
+    limits = JointLimits(-np.full(7, 2.0), np.full(7, 2.0), np.full(7, 1.5), np.full(7, 10.0))
+    verdicts = set()
+    for trial in range(600):
+        n = int(rng.integers(1, 30))
+        times = np.sort(rng.uniform(0, 3, n))
+        pos = rng.normal(0, 0.9, (n, 7))
+        vel, acc = rng.normal(0, 0.6, (2, n, 7)) * rng.choice([0.1, 1.0, 4.0])
+        vel[-1] = acc[-1] = 0.0
+        fault = trial % 7
+        if fault == 1:
+            field = [times, pos.ravel(), vel.ravel(), acc.ravel()][rng.integers(4)]
+            field[rng.integers(field.size)] = rng.choice([np.nan, np.inf, -np.inf])
+        elif fault == 2 and n > 1:
+            times[rng.integers(1, n)] = times[0] - rng.choice([0.0, 1e-10, 1.0])
+        elif fault == 3:
+            (vel, acc)[rng.integers(2)][-1, rng.integers(7)] = 1e-3
+        elif fault == 4:
+            times[0] = -rng.choice([1e-10, 1.0])
+        plan = Plan(times=times, phases=times, positions=pos, velocities=vel,
+                    accelerations=acc, component=0, alpha=1.0, final=False)
+        why = check_plan(plan)
+        assert why == _check_plan_numpy(plan)
+        verdicts.add(why)
+        if why is None:
+            expected = _limit_numbers_numpy(plan, limits)
+            scaled, why, scale = within_limits(plan, limits, 0.2)
+            if isinstance(expected, tuple):
+                j, worst = expected
+                assert why == (f'joint {j + 1} at {worst:.3f} rad, beyond its limits '
+                               f'[{limits.lower[j]:.3f}, {limits.upper[j]:.3f}]')
+                verdicts.add('position')
+            else:
+                assert scale == expected
+                verdicts.add('scaled' if scale > 1 else 'as is')
+    assert len(verdicts) == 10, verdicts     # None, every problem, and all three outcomes
+
+
+def test_plan_phases_are_numpys_linspace():
+    from mixture_ip_ros.estimation.plans import _linspace
+    rng = np.random.default_rng(8)
+    for _ in range(2000):
+        start = rng.choice([rng.uniform(-2, 1), 0.0, 1.0 - 1e-17, 5e-324])
+        stop = rng.choice([1.0, start, rng.uniform(-3, 3)])
+        num = int(rng.integers(2, 60))
+        assert np.array_equal(_linspace(start, stop, num), np.linspace(start, stop, num))

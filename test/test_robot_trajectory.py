@@ -226,6 +226,33 @@ def test_header_stamp_zero_starts_now():
     np.testing.assert_allclose(follower.sample(7.5, None, None)[0], 0.5)
 
 
+def test_references_equal_sample_bit_for_bit():
+    """References of a stepping clock, asked for in chunks across the evaluation blocks: every
+    segment kind, the segment from the state before the first point, and the hold after the
+    last, equal to sample() at the same times."""
+    rng = np.random.default_rng(3)
+    t = [0.3, 0.5, 0.9, 1.0, 1.2]
+    points = [TrajectoryPoint(t[0], *(rng.normal(size=(3, 7)).tolist())),
+              TrajectoryPoint(t[1], *(rng.normal(size=(3, 7)).tolist())),
+              TrajectoryPoint(t[2], *(rng.normal(size=(2, 7)).tolist())),   # quintic, cubic
+              TrajectoryPoint(t[3], rng.normal(size=7).tolist()),           # linear
+              TrajectoryPoint(t[4], rng.normal(size=7).tolist(), [0.0] * 7)]
+    q, qd = rng.normal(size=7), rng.normal(size=7)
+    fast, plain = TrajectoryFollower(7), TrajectoryFollower(7)
+    for f in (fast, plain):
+        f.set(validate_trajectory(J7, points, None, 0.0, J7))
+    clock, dt = 0.0123, 0.001
+    chunks = [1, 2, 250, 7, 600, 1, 400] * 3
+    while clock < 0.0123 + t[-1] + 0.1:       # on into the hold after the last point
+        n = chunks.pop(0)
+        refs = fast.references(clock, dt, n, q, qd)
+        assert 1 <= len(refs) <= n and refs.shape[1:] == (3, 7)
+        for row in refs:
+            assert np.array_equal(row, np.array(plain.sample(clock, q, qd)))
+            clock += dt
+    assert TrajectoryFollower(7).references(0.0, dt, 5, q, qd) is None
+
+
 # ---------------------------------------------------------------------- in the simulation
 
 # The probe of issue 13: what sim_node accepted before it enforced the joint limits. Each case

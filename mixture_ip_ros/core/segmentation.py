@@ -47,6 +47,12 @@ EVENT_KINDS = ('onset', 'end', 'gap')
 _SLACK = 1e-6
 
 
+def _median_sorted(v) -> float:
+    """The median of the sorted list ``v`` as np.median computes it."""
+    n = len(v)
+    return v[n // 2] if n % 2 else (v[n // 2 - 1] + v[n // 2]) / 2
+
+
 class Event(NamedTuple):
     """A segmentation event; ``time`` is in the stream's time base (seconds)."""
 
@@ -318,9 +324,11 @@ class MotionSegmenter:
         while self._rest and self._rest[0][0] < horizon:
             self._rest.popleft()
         if len(self._rest) >= 5:
-            v = np.fromiter((r[1] for r in self._rest), float, len(self._rest))
-            level = float(np.median(v))
-            spread = 1.4826 * float(np.median(np.abs(v - level)))
+            # np.median's values (the middle one, or the mean of the two middle ones) from a
+            # sorted list: a few microseconds per sample instead of numpy's overhead.
+            v = sorted([r[1] for r in self._rest])
+            level = _median_sorted(v)
+            spread = 1.4826 * _median_sorted(sorted([abs(x - level) for x in v]))
             self._on_thr = max(self.onset_speed, level + self.onset_noise_factor * spread)
             self._end_thr = max(self.end_speed, level + self.end_noise_factor * spread)
 

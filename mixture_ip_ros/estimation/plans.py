@@ -15,14 +15,36 @@ that time (while it is still ahead) so that the arrival does not recede with eve
 """
 
 from dataclasses import dataclass, replace
+import math
 from typing import Optional, Tuple
 
+import numba
 import numpy as np
 
 PHASE_EPS = 1e-6
 # A plan would have to be slowed down more than this to respect the joint speed limits: it is
 # not the movement that was learned any more, and is refused.
 MAX_TIME_SCALE = 4.0
+
+
+# The node plans in callbacks that follow a wait, where each distinct numpy call costs tens of
+# microseconds (bench/replan.py, 'after_sleep'): the phases and the checks of every plan are
+# compiled, one call each, with the values of the numpy statements they replace (tests).
+_F1, _F2 = numba.float64[:], numba.float64[:, :]
+
+
+@numba.njit(_F1(numba.float64, numba.float64, numba.int64), cache=True)
+def _linspace(start, stop, num):
+    """np.linspace(start, stop, num) for num >= 2, its operations elementwise (i step + start,
+    or (i / (num - 1)) delta + start when the step underflows to zero; the last one is stop)."""
+    div = num - 1
+    delta = stop - start
+    step = delta / div
+    y = np.empty(num)
+    for i in range(num):
+        y[i] = (i / div * delta if step == 0 else i * step) + start
+    y[num - 1] = stop
+    return y
 
 
 @dataclass(frozen=True)
@@ -57,7 +79,7 @@ def posterior_summary(estimator, t_now: float) -> PosteriorSummary:
     onset)."""
     k, alpha = estimator.map_hypothesis()
     return PosteriorSummary(probabilities=estimator.component_posterior(), component=int(k),
-                            alpha=float(alpha), phase=float(np.clip(alpha * t_now, 0.0, 1.0)))
+                            alpha=float(alpha), phase=float(min(max(alpha * t_now, 0.0), 1.0)))
 
 
 @dataclass(frozen=True)
@@ -111,7 +133,7 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
             final_time = t_now + max(lookahead, settle_time)
         times = np.array([float(final_time)])
     else:
-        phases = np.linspace(z_start, 1.0, n_points)
+        phases = _linspace(z_start, 1.0, n_points)
         times = phases / a
     # a: the grid value actually used (identical when it came from the grid)
     k, a, (pos, vel, acc), _ = estimator.mean_trajectories(phases, component=component, alpha=a)
@@ -135,7 +157,7 @@ def predicted_paths(estimator, n_points: int, components=None):
     """The whole predicted human movement (phases evenly spaced over 0..1) of each component
     under its MAP alpha: a list of (component, alpha, times (s since onset), positions
     (n_points, P)) for ``components`` (default: all)."""
-    phases = np.linspace(0.0, 1.0, n_points)
+    phases = _linspace(0.0, 1.0, n_points)
     out = []
     joint = estimator.joint_posterior()
     for k in (range(estimator.n_components) if components is None else components):
@@ -148,24 +170,71 @@ def predicted_paths(estimator, n_points: int, components=None):
 def predicted_wrist(estimator, plan: Plan, n_points: int):
     """The whole predicted human movement under the plan's hypothesis: times (s since onset)
     and positions (n_points, P) at phases evenly spaced over 0..1."""
-    phases = np.linspace(0.0, 1.0, n_points)
+    phases = _linspace(0.0, 1.0, n_points)
     _, a, _, positions = estimator.mean_trajectories((), phases, component=plan.component,
                                                      alpha=plan.alpha)
     return phases / a, positions
 
 
+_PLAN_PROBLEMS = (None, 'non-finite times', 'non-finite positions', 'non-finite velocities',
+                  'non-finite accelerations', 'times not strictly increasing (or negative)',
+                  'last point not at rest')
+
+
+@numba.njit(numba.int64(_F1, _F2, _F2, _F2), cache=True)
+def _plan_problem(times, positions, velocities, accelerations):
+    """Index into _PLAN_PROBLEMS of the first problem, in check_plan's order (0: none)."""
+    for x in times:
+        if not np.isfinite(x):
+            return 1
+    for code, a in ((2, positions), (3, velocities), (4, accelerations)):
+        for x in a.ravel():
+            if not np.isfinite(x):
+                return code
+    previous = 0.0
+    for i in range(times.shape[0]):
+        ns = np.rint(times[i] * 1e9)          # np.round: half to even
+        if (i == 0 and ns < 0) or (i > 0 and ns <= previous):
+            return 5
+        previous = ns
+    last = times.shape[0] - 1
+    for j in range(velocities.shape[1]):
+        if velocities[last, j] != 0 or accelerations[last, j] != 0:
+            return 6
+    return 0
+
+
+@numba.njit(numba.types.Tuple((numba.int64, numba.float64, numba.float64, numba.float64))(
+    _F2, _F2, _F2, _F1, _F1, _F1, _F1), cache=True)
+def _limit_ratios(positions, velocities, accelerations, lower, upper, velocity, acceleration):
+    """(the first joint with a position beyond its limits, or -1; its lowest position if one is
+    below the lower limit, else its highest; max |v| / v_limit; max |a| / a_limit), each
+    ratio a division then a maximum, as numpy's."""
+    n, q = positions.shape
+    for j in range(q):
+        low = high = False
+        lowest, highest = np.inf, -np.inf
+        for i in range(n):
+            p = positions[i, j]
+            low |= p < lower[j]
+            high |= p > upper[j]
+            lowest = min(lowest, p)
+            highest = max(highest, p)
+        if low or high:
+            return j, lowest if low else highest, 0.0, 0.0
+    v = a = -np.inf
+    for i in range(n):
+        for j in range(q):
+            v = max(v, abs(velocities[i, j]) / velocity[j])
+            a = max(a, abs(accelerations[i, j]) / acceleration[j])
+    return -1, 0.0, v, a
+
+
 def check_plan(plan: Plan) -> Optional[str]:
     """Why the plan must not be published (None if it may): non-finite values, times not
     strictly increasing at nanosecond resolution, motion at the last point."""
-    for name in ('times', 'positions', 'velocities', 'accelerations'):
-        if not np.isfinite(getattr(plan, name)).all():
-            return f'non-finite {name}'
-    ns = np.round(plan.times * 1e9)
-    if ns[0] < 0 or (ns[1:] <= ns[:-1]).any():
-        return 'times not strictly increasing (or negative)'
-    if plan.velocities[-1].any() or plan.accelerations[-1].any():
-        return 'last point not at rest'
-    return None
+    return _PLAN_PROBLEMS[_plan_problem(plan.times, plan.positions, plan.velocities,
+                                        plan.accelerations)]
 
 
 @dataclass(frozen=True)
@@ -204,15 +273,13 @@ def within_limits(plan: Plan, limits: JointLimits, t_plan: float) -> Tuple[Optio
     if plan.positions.shape[1] != limits.lower.shape[0]:
         raise ValueError(f'{plan.positions.shape[1]} joints in the plan, '
                          f'{limits.lower.shape[0]} in the limits')
-    low = plan.positions < limits.lower
-    high = plan.positions > limits.upper
-    if low.any() or high.any():
-        j = int(np.flatnonzero((low | high).any(axis=0))[0])
-        worst = plan.positions[:, j].min() if low[:, j].any() else plan.positions[:, j].max()
+    j, worst, v, a = _limit_ratios(plan.positions, plan.velocities, plan.accelerations,
+                                   limits.lower, limits.upper, limits.velocity,
+                                   limits.acceleration)
+    if j >= 0:
         return None, (f'joint {j + 1} at {worst:.3f} rad, beyond its limits '
                       f'[{limits.lower[j]:.3f}, {limits.upper[j]:.3f}]'), 1.0
-    scale = max(1.0, float(np.max(np.abs(plan.velocities) / limits.velocity)),
-                float(np.sqrt(np.max(np.abs(plan.accelerations) / limits.acceleration))))
+    scale = max(1.0, v, math.sqrt(a))
     if scale > MAX_TIME_SCALE:
         return None, (f'would have to be {scale:.1f} times slower to respect the joint speed '
                       f'and acceleration limits'), scale

@@ -97,8 +97,8 @@ class MotionPlausibility:
         with the points that pass every other check too."""
         lim = self.limits
         x, y, z = point
-        if not all(a <= v <= b for a, v, b in zip(lim.workspace_min, (x, y, z),
-                                                   lim.workspace_max)):
+        (lo_x, lo_y, lo_z), (hi_x, hi_y, hi_z) = lim.workspace_min, lim.workspace_max
+        if not (lo_x <= x <= hi_x and lo_y <= y <= hi_y and lo_z <= z <= hi_z):
             return 'outside_workspace'
         if not self._recent:
             return None
@@ -113,10 +113,15 @@ class MotionPlausibility:
         mid = self._before(t - w) if dt <= w else None
         first = self._before(mid[0] - w) if mid is not None else None
         if first is not None:
-            v2 = [(a - b) / (t - mid[0]) for a, b in zip((x, y, z), mid[1:])]
-            v1 = [(a - b) / (mid[0] - first[0]) for a, b in zip(mid[1:], first[1:])]
-            dv = math.sqrt(sum((a - b) ** 2 for a, b in zip(v2, v1)))
-            span = 0.5 * (t - first[0])
+            tm, xm, ym, zm = mid
+            tf, xf, yf, zf = first
+            d2, d1 = t - tm, tm - tf
+            # v2 - v1: the velocity over the last window minus the one over the window before
+            dx = (x - xm) / d2 - (xm - xf) / d1
+            dy = (y - ym) / d2 - (ym - yf) / d1
+            dz = (z - zm) / d2 - (zm - zf) / d1
+            dv = math.sqrt(dx ** 2 + dy ** 2 + dz ** 2)
+            span = 0.5 * (t - tf)
             noise = 4.0 * lim.noise / (w * w)          # of a difference of two velocities
             if dv / span > lim.max_acceleration + noise:
                 return 'implausible_acceleration'

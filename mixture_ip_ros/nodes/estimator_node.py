@@ -31,7 +31,7 @@ from geometry_msgs.msg import PointStamped
 from nav_msgs.msg import Path
 import numpy as np
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray, Header, MultiArrayDimension
+from std_msgs.msg import Float64MultiArray, Header
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
@@ -42,7 +42,8 @@ from mixture_ip_ros.estimation.plans import PosteriorSummary, predicted_paths, p
 from mixture_ip_ros.estimation.records import LatencyStats
 from mixture_ip_ros.io.model_file import load_model
 from mixture_ip_ros.nodes import qos
-from mixture_ip_ros.nodes.cdr import JointTrajectoryEncoder, PathEncoder
+from mixture_ip_ros.nodes.cdr import (Float64MultiArrayEncoder, JointTrajectoryEncoder,
+                                      PathEncoder)
 from mixture_ip_ros.nodes.diagnostics import OK, WARN, diagnostic_array
 from mixture_ip_ros.nodes.managed import ManagedNode, run_node
 from mixture_ip_ros.nodes.markers import prediction_markers
@@ -207,7 +208,8 @@ class EstimatorNode(ManagedNode):
                                      labels=meta.get('component_labels'),
                                      catch_up_velocity=p.catch_up_velocity, novelty=novelty,
                                      limits=limits)
-        self._summary_labels = ','.join(PosteriorSummary.labels(model.n_components))
+        self._posterior_encoder = Float64MultiArrayEncoder(
+            ','.join(PosteriorSummary.labels(model.n_components)))
         self._trajectory_encoder = JointTrajectoryEncoder(p.joint_names)
         self._path_encoder = PathEncoder(p.observed_frame)
         out = qos.reliable(p.output_queue_depth)
@@ -407,7 +409,7 @@ class EstimatorNode(ManagedNode):
                 plan.positions, plan.velocities, plan.accelerations))
             self._sent_any = True
             self.plan_latency.add(time.perf_counter() - t0)
-        self._post_pub.publish(self._posterior_msg(step.summary))
+        self._post_pub.publish(self._posterior_encoder.encode(step.summary.as_array()))
         if plan is None:
             self.get_logger().error(f'plan not published: {step.problem}',
                                     throttle_duration_sec=self.params.log_throttle_sec)
@@ -450,14 +452,6 @@ class EstimatorNode(ManagedNode):
         self._marker_pub.publish(prediction_markers(
             self.params.observed_frame, self.get_clock().now().to_msg(), paths, hand,
             [self._label(k).strip(' ()') or f'component {k}' for k, _, _ in paths]))
-
-    def _posterior_msg(self, summary) -> Float64MultiArray:
-        data = summary.as_array()
-        msg = Float64MultiArray()
-        msg.layout.dim = [MultiArrayDimension(label=self._summary_labels, size=len(data),
-                                              stride=len(data))]
-        msg.data = data.tolist()
-        return msg
 
     def publish_diagnostics(self) -> None:
         try:

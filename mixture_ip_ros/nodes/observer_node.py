@@ -174,6 +174,8 @@ class ObserverNode(ManagedNode):
             max_clock_offset=p.max_clock_offset, limits=limits)
         out = qos.reliable(p.output_queue_depth)
         self._obs_pub = self.create_lifecycle_publisher(PointStamped, p.observation_topic, out)
+        self._point = PointStamped()
+        self._point.header.frame_id = p.base_frame
         self._event_pub = self.create_lifecycle_publisher(Header, p.event_topic, out)
         self._diag_pub = self.create_lifecycle_publisher(DiagnosticArray, '/diagnostics', out)
         self._diag_seen = 0
@@ -242,9 +244,8 @@ class ObserverNode(ManagedNode):
             self.get_logger().warning(
                 f'{self.params.restart_after_backwards} consecutive wrist poses older than '
                 'the last accepted one: taking the stream as restarted')
-        point = PointStamped()
+        point = self._point          # one message, filled per pose (publish serializes it)
         point.header.stamp = stamp
-        point.header.frame_id = self.params.base_frame
         point.point.x, point.point.y, point.point.z = out.point
         self._obs_pub.publish(point)
         self._publish_events(out.events)

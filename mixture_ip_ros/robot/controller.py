@@ -5,10 +5,37 @@ from __future__ import annotations
 import logging
 import math
 
+import numba
 import numpy as np
 import pinocchio as pin
 
 from mixture_ip_ros.robot.kinematics import RobotKinematics
+
+
+@numba.njit(cache=True)
+def _acceleration(refs, k, q, qd, kp, kd, a, errors):
+    """The control law's acceleration for the reference refs[k] = (q_ref, qd_ref, qdd_ref):
+    a = qdd_ref + Kp (q_ref - q) + Kd (qd_ref - qd), and errors[k] = q_ref - q. The operations
+    of the numpy expression in compute, in its order (no fused multiply-add): the same values
+    bit for bit, in one call instead of six."""
+    for j in range(a.shape[0]):
+        e = refs[k, 0, j] - q[j]
+        errors[k, j] = e
+        a[j] = refs[k, 2, j] + kp[j] * e + kd[j] * (refs[k, 1, j] - qd[j])
+
+
+@numba.njit(cache=True)
+def _clip_into(tau, low, high, out):
+    """out = tau clipped to [low, high] and True; False (out untouched) when tau's sum of
+    squares is not finite (the check of compute's fast path)."""
+    ss = 0.0
+    for j in range(tau.shape[0]):
+        ss += tau[j] * tau[j]
+    if not np.isfinite(ss):
+        return False
+    for j in range(tau.shape[0]):
+        out[j] = min(max(tau[j], low[j]), high[j])
+    return True
 
 
 def default_gains(natural_frequency, damping_ratio, dof: int):
@@ -71,6 +98,10 @@ class ComputedTorqueController:
         self.last_fault: str | None = None
         self._active_fault: str | None = None
         self._last_safe = np.zeros(n)
+        # Load the compiled kernels now (numba's disk cache), not in the first control step.
+        _acceleration(np.zeros((1, 3, n)), 0, self._zero, self._zero, self.kp, self.kd,
+                      np.empty(n), np.empty((1, n)))
+        _clip_into(self._zero, self._neg_limit, self.effort_limit, np.empty(n))
 
     def _gain(self, value, name):
         try:
@@ -116,6 +147,66 @@ class ComputedTorqueController:
                 self.hold_position = None
                 return tau
         return self._compute_checked(q, qd, q_ref, qd_ref, qdd_ref)
+
+    def follow(self, q, qd, refs, ctrl, advance, errors) -> None:
+        """Closed-loop control steps on a reference: per row refs[k] = (q_ref, qd_ref, qdd_ref)
+        the torque compute(q, qd, *refs[k]) gives for the state of that moment is written into
+        ``ctrl``, then ``advance()`` moves the plant one step (updating q and qd in place), and
+        errors[k] = q_ref - q. The same torques, bit for bit, as calling compute per step."""
+        self._steps(q, qd, refs, len(refs), False, ctrl, advance, errors)
+
+    def hold(self, q, qd, n: int, ctrl, advance) -> None:
+        """``n`` closed-loop control steps without a reference (compute(q, qd) each), as
+        :meth:`follow`."""
+        i, n = 0, int(n)
+        while i < n and not (self.holding and self.hold_position is not None):
+            ctrl[:] = self.compute(q, qd)      # starts holding
+            advance()
+            i += 1
+        if i < n:
+            # The hold position stays the same while holding (compute keeps it, also when it
+            # holds through a fault), so the reference is constant.
+            refs = np.zeros((1, 3, self.dof))
+            refs[0, 0] = self.hold_position
+            self._steps(q, qd, refs, n - i, True, ctrl, advance, np.empty((1, self.dof)))
+
+    def _steps(self, q, qd, refs, n, holding, ctrl, advance, errors):
+        # At 1 kHz the cost is numpy's and Python's call overhead, not the arithmetic: four calls
+        # per step (two compiled, Pinocchio's RNEA, the plant's step), everything in locals.
+        # compute's fast path in those calls; a torque that is not finite goes through compute
+        # itself (the careful path finds the culprit, holds and logs).
+        model, data = self._model, self._data
+        kp, kd, low, high = self.kp, self.kd, self._neg_limit, self.effort_limit
+        rnea, accelerate, clip_into = pin.rnea, _acceleration, _clip_into
+        a = np.empty(self.dof)
+        fast = None     # the last unclipped torque of the fast path, its state not yet recorded
+        for i in range(n):
+            k = 0 if holding else i
+            accelerate(refs, k, q, qd, kp, kd, a, errors)
+            try:
+                tau = rnea(model, data, q, qd, a)
+                ok = clip_into(tau, low, high, ctrl)
+            except (TypeError, ValueError, RuntimeError):
+                ok = False
+            if ok:
+                fast = tau
+            else:
+                if fast is not None:
+                    self._record_fast(fast, ctrl, holding)
+                    fast = None
+                ctrl[:] = self.compute(q, qd) if holding else self.compute(q, qd, *refs[k])
+            advance()
+        if fast is not None:
+            self._record_fast(fast, ctrl, holding)
+
+    def _record_fast(self, tau, clipped, holding):
+        """The state compute's fast path leaves after the torque ``tau`` (clipped: ``clipped``)."""
+        self._active_fault = None
+        self._last_raw = tau
+        self._last_safe = clipped.copy()
+        if not holding:
+            self.holding = False
+            self.hold_position = None
 
     def _fast(self, q, qd, q_ref, qd_ref, qdd_ref):
         try:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from functools import partial
 from typing import Sequence
 
 import mujoco
@@ -178,29 +179,34 @@ class RobotSimulation:
         """Advance n control steps of dt: sample the reference, compute torques, step MuJoCo."""
         model, data = self.model, self.data
         follower, controller = self.follower, self.controller
+        advance = partial(mujoco.mj_step, model, data)
         # The scene has exactly the arm's joints, so qpos/qvel are the arm state (no slicing).
         q = data.qpos
         qd = data.qvel
         ctrl = data.ctrl
-        # Tracking tally in locals (written back once): this loop runs at 1 kHz.
+        n = int(n)
         track_sq, track_max, track_steps = 0.0, self._track_max, 0
-        for _ in range(int(n)):
-            ref = follower.sample(data.time, q, qd)
-            self.reference = ref
-            if ref is None:
-                tau = controller.compute(q, qd)
-            else:
-                tau = controller.compute(q, qd, *ref)
-                err = ref[0] - q
-                sq = err.dot(err)
-                track_sq += sq
-                track_steps += 1
-                # max |e_j| <= |e|: the norm rules out a new maximum cheaply; the exact maximum
-                # only when it may be one.
-                if sq > track_max * track_max:
-                    track_max = max(track_max, float(np.abs(err).max()))
-            ctrl[:] = tau
-            mujoco.mj_step(model, data)
+        while n > 0:
+            # The references of the next steps at once (MuJoCo's clock advances by t += dt).
+            refs = follower.references(data.time, self.dt, n, q, qd)
+            if refs is None:
+                controller.hold(q, qd, n, ctrl, advance)
+                self.reference = None
+                break
+            m = len(refs)
+            errors = np.empty((m, self.dof))
+            controller.follow(q, qd, refs, ctrl, advance, errors)
+            self.reference = tuple(refs[-1])
+            # Tally: each step's e.e as numpy's dot computes it, summed in step order; the
+            # maximum |e_j| over the steps whose e.e is a number.
+            sq = (errors[:, None, :] @ errors[:, :, None]).ravel()
+            for v in sq.tolist():
+                track_sq += v
+            counted = errors[~np.isnan(sq)]
+            if counted.size:
+                track_max = max(track_max, float(np.abs(counted).max()))
+            track_steps += m
+            n -= m
         self._track_sq += track_sq
         self._track_max = track_max
         self._track_steps += track_steps
