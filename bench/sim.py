@@ -39,8 +39,10 @@ from mixture_ip_ros.robot.description import JOINT_NAMES  # noqa: E402
 from mixture_ip_ros.robot.sim import RobotSimulation  # noqa: E402
 from mixture_ip_ros.robot.trajectory import points_from_arrays  # noqa: E402
 
-Q_A = np.array([-0.8, 0.3, 0.5, -1.6, -0.4, 0.8, -0.5])
-Q_B = np.array([0.8, 1.0, -0.5, -0.6, 0.5, 1.5, 0.8])
+# Minimum-jerk moves between these in --seconds (2 s): joint 1's peak speed, 1.875 x 1.5 rad /
+# 2 s = 1.41 rad/s, is within the iiwa's 1.48 rad/s (a trajectory beyond it is refused).
+Q_A = np.array([-0.75, 0.3, 0.5, -1.6, -0.4, 0.8, -0.5])
+Q_B = np.array([0.75, 1.0, -0.5, -0.6, 0.5, 1.5, 0.8])
 
 
 def _min_jerk_points(q_a, q_b, duration, n=21):
@@ -53,6 +55,12 @@ def _min_jerk_points(q_a, q_b, duration, n=21):
     return points_from_arrays(t, p, v, a)
 
 
+def _set(sim, points):
+    reason = sim.set_trajectory(JOINT_NAMES, points)
+    if reason is not None:
+        raise SystemExit(f'the benchmark trajectory was refused: {reason}')
+
+
 def bench_library(runs: int, seconds: float):
     sim = RobotSimulation(q0=Q_A)
     n = int(round(seconds / sim.dt))
@@ -60,7 +68,7 @@ def bench_library(runs: int, seconds: float):
     for run in range(runs):
         a, b = (Q_A, Q_B) if run % 2 == 0 else (Q_B, Q_A)
         sim.set_state(a)
-        sim.set_trajectory(JOINT_NAMES, _min_jerk_points(a, b, seconds))
+        _set(sim, _min_jerk_points(a, b, seconds))
         start = time.perf_counter()
         sim.step(n)
         factors.append(seconds / (time.perf_counter() - start))
@@ -68,7 +76,7 @@ def bench_library(runs: int, seconds: float):
     # The same loop as RobotSimulation.step and ComputedTorqueController.follow, with a
     # stopwatch around each part.
     sim.set_state(Q_A)
-    sim.set_trajectory(JOINT_NAMES, _min_jerk_points(Q_A, Q_B, seconds))
+    _set(sim, _min_jerk_points(Q_A, Q_B, seconds))
     model, data, ctl = sim.model, sim.data, sim.controller
     clock = time.perf_counter
     t_traj = t_ctrl = t_mj = 0.0

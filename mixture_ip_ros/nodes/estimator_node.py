@@ -518,6 +518,11 @@ class EstimatorNode(ManagedNode):
                                   f'{counts}', throttle_duration_sec=self.params.log_throttle_sec)
 
     def _log_finished(self, rec) -> None:
+        if not rec.committed and rec.unexplained is not None:
+            self.get_logger().warning(
+                f'interaction ended uncommitted, the model does not explain it '
+                f'({rec.unexplained}): robot not moved')
+            return
         if not rec.committed:
             confidence = rec.confidence if rec.confidence is not None else float('nan')
             self.get_logger().warning(
