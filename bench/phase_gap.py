@@ -32,7 +32,8 @@ import numpy as np  # noqa: E402
 
 from mixture_ip_ros.app.evaluation import (GESTURE_FRACTIONS, _feed_until,  # noqa: E402
                                            decimated_rows, majority_labels,
-                                           online_component_given_end, phase_known_components)
+                                           online_component_given_end, online_components,
+                                           phase_known_components)
 from mixture_ip_ros.core.interaction import trajectory_distribution  # noqa: E402
 from mixture_ip_ros.core.mixture import MixtureIProMP  # noqa: E402
 from mixture_ip_ros.core.online import OnlineEstimator  # noqa: E402
@@ -47,17 +48,6 @@ EVERY_SAMPLE = {**DEFAULT, 'min_interval': 0.0}
 
 def pct(x):
     return [round(100 * float(v), 1) for v in x]
-
-
-def online(model, demo, fractions, settings):
-    """The most probable component after each fraction, phase unknown."""
-    est = OnlineEstimator(model, **settings)
-    rows = np.flatnonzero(~np.isnan(demo.observed).any(axis=1))
-    out, j = [], 0
-    for f in fractions:
-        j = _feed_until(est, demo, rows, j, f * demo.duration)
-        out.append(int(np.argmax(est.component_posterior())))
-    return out
 
 
 def gestures():
@@ -75,22 +65,24 @@ def gestures():
             return pct((names[np.array(rows)] == y_test[:, None]).mean(axis=0))
         inflated = copy.deepcopy(model)
         inflated.noise_var_ = model.noise_var_ * 5
+
+        def online(m, settings):
+            return acc([online_components(m, d, fr, **settings) for d in test])
+
         r = {'phase_known': acc([phase_known_components(model, d, fr) for d in test]),
              'phase_known_without_duration': acc([phase_known_components(
                  model, d, fr, duration=False) for d in test]),
-             'online_as_evaluated': acc([online(model, d, fr, DEFAULT) for d in test]),
-             'nearly_exact_1000_alphas': acc([online(model, d, fr, FINE) for d in test]),
-             'online_every_sample': acc([online(model, d, fr, EVERY_SAMPLE) for d in test]),
+             'online_as_evaluated': online(model, DEFAULT),
+             'nearly_exact_1000_alphas': online(model, FINE),
+             'online_every_sample': online(model, EVERY_SAMPLE),
              # every sample, each worth a fifth (100 Hz where the estimator uses 20 Hz)
-             'online_every_sample_noise_x5': acc([online(inflated, d, fr, EVERY_SAMPLE)
-                                                  for d in test]),
+             'online_every_sample_noise_x5': online(inflated, EVERY_SAMPLE),
              'phase_known_every_sample': acc([phase_known_components(model, d, fr, 0.0)
                                               for d in test])}
         for scale in (0.5, 2.0):
             m = copy.deepcopy(model)
             m.alpha_std_ = model.alpha_std_ * scale
-            r[f'nearly_exact_prior_spread_x{scale:g}'] = acc(
-                [online(m, d, fr, FINE) for d in test])
+            r[f'nearly_exact_prior_spread_x{scale:g}'] = online(m, FINE)
             r[f'phase_known_prior_spread_x{scale:g}'] = acc(
                 [phase_known_components(m, d, fr) for d in test])
         r['online_given_end_at_100'] = pct([np.mean([

@@ -615,10 +615,11 @@ def _prefix_length(demo, fraction) -> int:
     return max(1, int(np.searchsorted(demo.t, fraction * demo.duration + 1e-9, side='right')))
 
 
-def online_components(model, demo, fractions, n_alpha=50, min_interval=0.05):
+def online_components(model, demo, fractions, n_alpha=50, min_interval=0.05, **settings):
     """The most probable component (eq. 12 with the phase marginalised) of the online estimator
-    fed ``demo`` sample by sample, phase unknown, after each fraction of the movement."""
-    est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval)
+    fed ``demo`` sample by sample, phase unknown, after each fraction of the movement.
+    ``settings``: further OnlineEstimator arguments (e.g. alpha_range_std)."""
+    est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval, **settings)
     rows = np.flatnonzero(~np.isnan(demo.observed).any(axis=1))
     out, j = [], 0
     for f in fractions:

@@ -44,7 +44,7 @@ from mixture_ip_ros.io.model_file import load_model
 from mixture_ip_ros.nodes import qos
 from mixture_ip_ros.nodes.cdr import (Float64MultiArrayEncoder, JointTrajectoryEncoder,
                                       PathEncoder)
-from mixture_ip_ros.nodes.diagnostics import OK, WARN, diagnostic_array
+from mixture_ip_ros.nodes.diagnostics import OK, WARN, PublishesDiagnostics, diagnostic_array
 from mixture_ip_ros.nodes.managed import ManagedNode, run_node
 from mixture_ip_ros.nodes.markers import prediction_markers
 from mixture_ip_ros.nodes.params import autostart_param, finite_list, param, positive
@@ -138,7 +138,7 @@ class EstimatorParameters:
                                     low=0.0, high=3600.0)
 
 
-class EstimatorNode(ManagedNode):
+class EstimatorNode(PublishesDiagnostics, ManagedNode):
 
     NODE_NAME = 'estimator_node'
     SCHEMA = EstimatorParameters
@@ -452,13 +452,6 @@ class EstimatorNode(ManagedNode):
         self._marker_pub.publish(prediction_markers(
             self.params.observed_frame, self.get_clock().now().to_msg(), paths, hand,
             [self._label(k).strip(' ()') or f'component {k}' for k, _, _ in paths]))
-
-    def publish_diagnostics(self) -> None:
-        try:
-            self._diag_pub.publish(self.diagnostics_msg())
-        except Exception as exc:
-            self.get_logger().error(f'diagnostics failed: {exc!r}',
-                                    throttle_duration_sec=self.params.log_throttle_sec)
 
     def diagnostics_msg(self) -> DiagnosticArray:
         pl = self.planner

@@ -29,7 +29,7 @@ from mixture_ip_ros.core.stamps import ns_to_parts, stamp_to_ns
 from mixture_ip_ros.estimation.observer import WristObserver
 from mixture_ip_ros.estimation.pose_check import HumanLimits
 from mixture_ip_ros.nodes import qos
-from mixture_ip_ros.nodes.diagnostics import OK, WARN, diagnostic_array
+from mixture_ip_ros.nodes.diagnostics import OK, WARN, PublishesDiagnostics, diagnostic_array
 from mixture_ip_ros.nodes.managed import ManagedNode, run_node
 from mixture_ip_ros.nodes.params import autostart_param, finite_list, param, positive
 from mixture_ip_ros.robot.description import (BASE_FRAME, DEFAULT_ROBOT, load_description,
@@ -140,7 +140,7 @@ class ObserverParameters:
                                       high=3600.0)
 
 
-class ObserverNode(ManagedNode):
+class ObserverNode(PublishesDiagnostics, ManagedNode):
 
     NODE_NAME = 'observer_node'
     SCHEMA = ObserverParameters
@@ -255,13 +255,6 @@ class ObserverNode(ManagedNode):
             self._publish_events(self.observer.on_timer(self.get_clock().now().nanoseconds))
         except Exception as exc:
             self.get_logger().error(f'gap check failed: {exc!r}',
-                                    throttle_duration_sec=self.params.log_throttle_sec)
-
-    def publish_diagnostics(self) -> None:
-        try:
-            self._diag_pub.publish(self.diagnostics_msg())
-        except Exception as exc:
-            self.get_logger().error(f'diagnostics failed: {exc!r}',
                                     throttle_duration_sec=self.params.log_throttle_sec)
 
     def diagnostics_msg(self) -> DiagnosticArray:
