@@ -128,6 +128,26 @@ def test_pole_mixture_goes_around_the_pole(tmp_path):
     assert_real_pngs(tmp_path, m['plots'])
 
 
+def test_box_assembly_of_another_arm_uses_its_joints_and_kinematics(tmp_path):
+    """UR5 bags (6 joints): read with its joint names, the hand error from its forward
+    kinematics, the same aims as the iiwa's; the iiwa's bags are refused for the UR5 whole."""
+    bag_dir = tmp_path / 'ur5_bags'
+    scenarios.write_scenario_bags('box_assembly', bag_dir, seed=0, robot='ur5')
+    config = EvalConfig(candidates=(1, 3), model={'n_basis': 10}, fold_stride=3, subsample=3,
+                        fractions=(0.5, 1.0))
+    m = evaluate('box_assembly', tmp_path / 'out', bag_dir=bag_dir, config=config, robot='ur5')
+    assert m['robot'] == 'ur5' and m['n_demonstrations'] == 48 and not m['source']['skipped']
+    assert m['n_components_selected'] == 3 and m['selection_accuracy_final'] == 1.0
+    for label, thesis in THESIS_HAND_ERROR_CM.items():
+        assert m['hand_error_cm'][label][0] < thesis
+    # Without the robot (the iiwa's joint names) no bag of the UR5 loads: refused, no output.
+    with pytest.raises(ValueError, match='none of the 48 bags'):
+        evaluate('box_assembly', tmp_path / 'iiwa_out', bag_dir=bag_dir, config=config)
+    assert not (tmp_path / 'iiwa_out').exists()
+    with pytest.raises(ValueError, match='has no robot'):
+        evaluate('phase', tmp_path / 'phase', robot='ur5')
+
+
 def test_prepare_keeps_the_final_sample():
     demo = [g.to_demonstration() for g in scenarios.box_assembly(0, counts={'plate': 1})][0]
     sub = prepare([demo], 4)[0]

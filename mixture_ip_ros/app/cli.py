@@ -124,7 +124,7 @@ def _floats(text, what):
 def _evaluate(args):
     from mixture_ip_ros.app.evaluation import evaluate
     metrics = evaluate(args.scenario, Path(args.out), seed=args.seed, quick=args.quick,
-                       bag_dir=args.bags)
+                       bag_dir=args.bags, robot=args.robot)
     print(json.dumps(metrics, indent=1))
 
 
@@ -255,6 +255,9 @@ def build_parser():
     e.add_argument('--quick', action='store_true', help='fewer components/folds (for smoke runs)')
     e.add_argument('--bags', default=None, type=_existing_dir,
                    help='evaluate on this folder of bags (with labels.json) instead of generating')
+    e.add_argument('--robot', default=None,
+                   help='box_assembly and pole: the arm of the demonstrations, a shipped name or '
+                        'the path of a robot description file (default: the iiwa14)')
     e.set_defaults(func=_evaluate)
 
     d = sub.add_parser('demo', help='closed loop: bags -> observer -> estimator -> MuJoCo arm')

@@ -106,13 +106,16 @@ def letter_config(quick: bool = False) -> EvalConfig:
 
 def evaluate(scenario: str, out_dir: Path, seed: int = 0, quick: bool = False, *,
              bag_dir: Optional[Path] = None, demos: Optional[list] = None,
-             config: Optional[EvalConfig] = None) -> dict:
+             config: Optional[EvalConfig] = None, robot=None) -> dict:
     """Run one scenario's experiments; write PNGs and ``metrics.json`` into ``out_dir``.
 
     box_assembly and pole learn from generated demonstrations (``seed``), or from ``bag_dir`` (a
     folder of demonstration bags, labels from the bags' metadata or labels.json), or from
     ``demos`` (labelled Demonstrations). ``config`` replaces the scenario's default settings
     (``quick`` picks smaller ones: fewer K candidates, folds, basis functions and time steps).
+    ``robot`` (box_assembly and pole): the arm the demonstrations are for, a shipped name or a
+    description file (None: the iiwa 14); it generates them, reads the bags' joints and gives
+    the hand positions.
     """
     if scenario not in SCENARIOS:
         raise ValueError(f'unknown scenario {scenario!r}; known: {list(SCENARIOS)}')
@@ -121,24 +124,33 @@ def evaluate(scenario: str, out_dir: Path, seed: int = 0, quick: bool = False, *
     if scenario in ('phase', 'missing_data', 'gestures') and (bag_dir is not None or demos is not None):
         raise ValueError(f'scenario {scenario!r} uses generated letters only; '
                          'bag_dir/demos are for box_assembly and pole')
+    if scenario not in ('box_assembly', 'pole') and robot is not None:
+        raise ValueError(f'scenario {scenario!r} has no robot; robot is for box_assembly and pole')
     out_dir = Path(out_dir)
     from mixture_ip_ros.scenarios import generated as scen
     t0 = time.perf_counter()
     if scenario in ('box_assembly', 'pole'):
+        from mixture_ip_ros.robot.kinematics import RobotKinematics
+        kin = RobotKinematics(robot)
         if bag_dir is not None:
-            demos, skipped = load_labelled_bags(bag_dir)
+            demos, skipped = load_labelled_bags(bag_dir, kin.description)
             source = {'bags': str(bag_dir), 'skipped': [f'{p.name}: {r}' for p, r in skipped]}
         elif demos is not None:
             demos = list(demos)
             source = 'given demonstrations'
         else:
-            demos = [g.to_demonstration() for g in scen.generate(scenario, seed)]
+            demos = [g.to_demonstration() for g in scen.generate(scenario, seed, kinematics=kin)]
             source = f'generated seed {seed}'
+        bad = sorted({d.n_controlled_dofs for d in demos} - {kin.dof})
+        if bad:
+            raise ValueError(f'the demonstrations have {bad[0]} controlled DOFs, the robot '
+                             f'{kin.description.name} has {kin.dof} joints')
         out_dir.mkdir(parents=True, exist_ok=True)     # only once there is data to evaluate
         if scenario == 'box_assembly':
-            metrics = evaluate_box_assembly(demos, out_dir, config or box_config(quick))
+            metrics = evaluate_box_assembly(demos, out_dir, config or box_config(quick), kin)
         else:
-            metrics = evaluate_pole(demos, out_dir, config or pole_config(quick))
+            metrics = evaluate_pole(demos, out_dir, config or pole_config(quick), kin)
+        metrics = {'robot': kin.description.name, **metrics}
     elif scenario == 'gestures':
         from mixture_ip_ros.scenarios import gestures
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -161,12 +173,15 @@ def evaluate(scenario: str, out_dir: Path, seed: int = 0, quick: bool = False, *
     return metrics
 
 
-def load_labelled_bags(bag_dir):
-    """(demonstrations, skipped bags) from a folder of bags; labels from the bags' metadata or
-    the folder's labels.json."""
+def load_labelled_bags(bag_dir, robot=None):
+    """(demonstrations, skipped bags) from a folder of bags of ``robot`` (a RobotDescription;
+    None: the iiwa 14); labels from the bags' metadata or the folder's labels.json."""
     from mixture_ip_ros.io.dataset import load_dataset
+    from mixture_ip_ros.robot.description import load_description
     from mixture_ip_ros.scenarios.generated import LABEL_FILE, read_labels
-    demos, skipped = load_dataset(bag_dir)
+    robot = load_description(robot) if robot is None or isinstance(robot, str) else robot
+    demos, skipped = load_dataset(bag_dir, joint_names=robot.joint_names,
+                                  transform=robot.world_to_base())
     for s in skipped:
         logger.warning('skipped %s: %s', s.path, s.reason)
     if any(d.label is None for d in demos) and (Path(bag_dir) / LABEL_FILE).is_file():
@@ -263,8 +278,10 @@ def _feed_until(est, demo, rows, j, t_max):
 
 # =========================================================================== box assembly
 
-def evaluate_box_assembly(demos, out_dir: Path, config: EvalConfig = None) -> dict:
-    """Thesis 3.4.2 plus online selection; see the module docstring. Returns the metrics dict."""
+def evaluate_box_assembly(demos, out_dir: Path, config: EvalConfig = None,
+                          kinematics=None) -> dict:
+    """Thesis 3.4.2 plus online selection; see the module docstring. Returns the metrics dict.
+    ``kinematics``: the arm's RobotKinematics (None: the iiwa 14's)."""
     from mixture_ip_ros.viz import plots
     from mixture_ip_ros.robot.kinematics import RobotKinematics
     config = _with_default_noise(config or box_config(), WRIST_OBSERVATION_NOISE)
@@ -273,7 +290,7 @@ def evaluate_box_assembly(demos, out_dir: Path, config: EvalConfig = None) -> di
     demos = prepare(demos, config.subsample)
     if any(d.label is None for d in demos):
         raise ValueError('box_assembly evaluation needs labelled demonstrations')
-    kin = RobotKinematics()
+    kin = kinematics or RobotKinematics()
     candidates = [int(k) for k in config.candidates if k <= len(demos) - 1]
     folds = fold_indices(len(demos), config.fold_stride)
     t0 = time.perf_counter()
@@ -368,8 +385,9 @@ def evaluate_box_assembly(demos, out_dir: Path, config: EvalConfig = None) -> di
 
 # =========================================================================== pole
 
-def evaluate_pole(demos, out_dir: Path, config: EvalConfig = None) -> dict:
-    """Thesis 3.4.1: RMS vs K, and one Gaussian vs the mixture as flange paths around the pole."""
+def evaluate_pole(demos, out_dir: Path, config: EvalConfig = None, kinematics=None) -> dict:
+    """Thesis 3.4.1: RMS vs K, and one Gaussian vs the mixture as flange paths around the pole.
+    ``kinematics``: the arm's RobotKinematics (None: the iiwa 14's)."""
     from mixture_ip_ros.viz import plots
     from mixture_ip_ros.scenarios.generated import (POLE_BOTH_SIDES_Y, link_points,
                                               pole_clearance)
@@ -379,7 +397,7 @@ def evaluate_pole(demos, out_dir: Path, config: EvalConfig = None) -> dict:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     demos = prepare(demos, config.subsample)
-    kin = RobotKinematics()
+    kin = kinematics or RobotKinematics()
     candidates = [int(k) for k in config.candidates if k <= len(demos) - 1]
     if 1 not in candidates:
         candidates = [1] + candidates
