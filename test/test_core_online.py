@@ -483,8 +483,16 @@ def test_end_posterior_is_the_batch_posterior_with_the_phase_known(model_and_dem
                 for k in range(3)]
     assert np.allclose(est.end_posterior(1.2 * T), np.exp(lp_later - logsumexp(lp_later)),
                        rtol=1e-8, atol=1e-12)
-    with pytest.raises(ValueError, match='at or after the last sample absorbed'):
-        est.end_posterior(0.5 * T)
+    # An end dated back before the last samples (the hand at rest since): those at phase 1.
+    z_early = np.minimum(demo.t[used] / (0.8 * T), 1.0)
+    lp_early = [np.log(model.weights_[k])
+                + norm(model.alpha_mean_[k], model.alpha_std_[k]).logpdf(1 / (0.8 * T))
+                + _dense_evidence(model, k, z_early, demo.observed[used]) for k in range(3)]
+    assert np.allclose(est.end_posterior(0.8 * T), np.exp(lp_early - logsumexp(lp_early)),
+                       rtol=1e-8, atol=1e-12)
+    for bad in (0.0, -1.0, np.nan):
+        with pytest.raises(ValueError, match='positive number of seconds'):
+            est.end_posterior(bad)
     with pytest.raises(ValueError, match='no observation absorbed'):
         OnlineEstimator(model, n_alpha=3).end_posterior(1.0)
     est.reset()

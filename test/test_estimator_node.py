@@ -211,9 +211,11 @@ def test_interaction_commits_then_replans_and_ends_with_a_final_plan(estimator, 
     e.h.spin_until(lambda: e.node.state == 'done', what='done')
     assert stamp_to_ns(final.header.stamp) == ONSET_NS + _ns(demo.t[-1])   # the 'end' event
     oracle = _oracle(model_path, demo, [0, 5] + idx + rest)
-    k, alpha = oracle.map_hypothesis()
+    # With the end known the phase is too: the component of p(k | D, T), alpha = 1 / T.
+    t_end = _ns(demo.t[-1]) * 1e-9
+    k, alpha = int(np.argmax(oracle.end_posterior(t_end))), 1.0 / t_end
     assert np.allclose(final.points[-1].positions,
-                       oracle.predict_at_rest(demo.observed[-1])[0], atol=1e-12)
+                       oracle.predict_at_rest(demo.observed[-1], component=k)[0], atol=1e-12)
     # the held-out demonstration's own final posture (independent of the estimator)
     assert np.abs(np.array(final.points[-1].positions) - demo.controlled[-1]).max() < 0.1
     assert not np.any(final.points[-1].velocities)

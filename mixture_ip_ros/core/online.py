@@ -366,16 +366,16 @@ class OnlineEstimator:
         alpha = 1/t_end exactly: p(k) p(alpha | k) p(D | k, alpha) normalised over k (eqs. 11,
         17-18 at that alpha; the Jacobian from T to alpha is the same for every k). This is the
         batch posterior with the phase known (MixtureIProMP.component_posterior with alpha),
-        from the samples absorbed. Raises ValueError for a t_end before the last sample
-        absorbed."""
+        from the samples absorbed. Samples after ``t_end`` are taken at phase 1: the end is
+        dated back to when the hand stopped, and after it the hand is at rest where the
+        movement ended. Raises ValueError without samples or for a t_end that is not positive."""
         if not self._times:
             raise ValueError('no observation absorbed yet')
-        if not (np.isfinite(t_end) and t_end >= max(self._times) and t_end > 0):
-            raise ValueError(f'the end time must be at or after the last sample absorbed '
-                             f'({max(self._times):g} s), got {t_end!r}')
+        if not (np.isfinite(t_end) and t_end > 0):
+            raise ValueError(f'the end time must be a positive number of seconds, got {t_end!r}')
         alpha = 1.0 / float(t_end)
-        return self.model.component_posterior(alpha * np.asarray(self._times),
-                                              np.asarray(self._values), alpha=alpha)
+        z = np.minimum(alpha * np.asarray(self._times), 1.0)
+        return self.model.component_posterior(z, np.asarray(self._values), alpha=alpha)
 
     def observed_weights(self, k, m):
         """Posterior N(mean, cov) of the observed agent's weights under hypothesis (k, m).

@@ -31,7 +31,8 @@ import numpy as np
 from mixture_ip_ros.core.novelty import NoveltyMonitor, NoveltyThresholds
 from mixture_ip_ros.estimation.held import HeldSamples
 from mixture_ip_ros.estimation.plans import (JointLimits, Plan, PosteriorSummary, build_plan,
-                                             check_plan, posterior_summary, within_limits)
+                                             check_plan, end_summary, posterior_summary,
+                                             within_limits)
 from mixture_ip_ros.estimation.records import Interaction, ObservationCounts, Switch
 from mixture_ip_ros.estimation.schedule import ReplanSchedule
 
@@ -243,7 +244,9 @@ class OnlinePlanner:
         return self._absorb_slice() or self._schedule.due_on_timer(now_ns)
 
     def end(self, stamp_ns: int, now_ns: Optional[int] = None) -> Optional[Step]:
-        """The human stopped: the last plan (sent only if committed), then 'done'."""
+        """The human stopped (``stamp_ns``, dated back to when the hand came to rest): the last
+        plan, its component chosen with the end time known (:func:`end_summary`) and sent only
+        if committed, then 'done'."""
         if not self.active:
             return None
         self._absorb_slice(len(self._backlog))
@@ -251,7 +254,7 @@ class OnlinePlanner:
         if np.isfinite(t_end) and t_end > self.t_now:
             self._t_latest = t_end
         self._trigger_ns = int(stamp_ns)     # the end is dated back: often before the latest
-        step = self.replan(now_ns, final=True)
+        step = self.replan(now_ns, final=True, t_end=t_end)
         self._close('end', t_end)
         return step
 
@@ -331,14 +334,17 @@ class OnlinePlanner:
         return self.reject(reason)
 
     # -- planning ---------------------------------------------------------------------
-    def replan(self, now_ns: Optional[int] = None, final: bool = False) -> Optional[Step]:
+    def replan(self, now_ns: Optional[int] = None, final: bool = False,
+               t_end: Optional[float] = None) -> Optional[Step]:
         """Update the summary and the plan: None when there is no interaction or nothing new
         since the last replan.
 
         ``now_ns``: the present on the stamps' clock, when known. Observations reach the planner
         some milliseconds after their stamps; the plan starts from the present (if it is later
         than the latest observation by less than MAX_LAG s), so its first point and its end are
-        never already in the past when the controller receives it."""
+        never already in the past when the controller receives it. ``t_end``: the end of the
+        movement (s since onset), known with the observer's 'end': the component is then chosen
+        with the phase known (:func:`end_summary`)."""
         if not self.active or not (self._dirty or final):
             return None
         self._dirty = False
@@ -347,7 +353,10 @@ class OnlinePlanner:
         est = self.estimator
         rec = self.current
         t_now = self.t_now
-        summary = posterior_summary(est, t_now)
+        if t_end is not None and np.isfinite(t_end) and t_end > 0 and est.n_observations:
+            summary = end_summary(est, t_end)
+        else:
+            summary = posterior_summary(est, t_now)
         k = summary.component
         rec.component, rec.label, rec.confidence = k, self.label(k), summary.confidence
         rec.alpha, rec.phase = summary.alpha, summary.phase
