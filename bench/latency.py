@@ -39,6 +39,7 @@ Timing only, no assertions.
 """
 
 import argparse
+import contextlib
 import json
 import os
 import signal
@@ -337,9 +338,10 @@ def _wait_for(predicate, timeout, what):
         time.sleep(0.02)
 
 
-def run_in_process(domain, warm, stream, model_path=None, overrides=None):
-    """One fresh chain (the nodes, or the relays without ``model_path``): the warm-up, then the
-    measured stream. Returns (latency keys, samples, node statistics)."""
+@contextlib.contextmanager
+def warmed_chain(domain, warm, model_path=None, overrides=None):
+    """A fresh in-process chain (the nodes, or the relays without ``model_path``) on its own
+    context, discovered and warmed up with ``warm``; torn down on leaving."""
     ctx = Context()
     rclpy.init(context=ctx, domain_id=domain)
     try:
@@ -348,24 +350,31 @@ def run_in_process(domain, warm, stream, model_path=None, overrides=None):
             _wait_for(lambda: _discovered(p.probe), 10, 'discovery')
             p.probe.publish_stream(warm, warm.messages())
             p.probe.wait_quiet()
-            p.probe.reset()
-            p.probe.publish_stream(stream, stream.messages())
-            p.probe.wait_quiet()
-            keys, samples = latency_keys(p.probe)
-            stats = {}
-            if model_path is not None:
-                est = p.estimator
-                stats = {'estimator_update_us_mean': est.latency.mean_us,
-                         'estimator_update_us_max': est.latency.max_us,
-                         'estimator_plan_us_mean': est.plan_latency.mean_us,
-                         'estimator_plan_us_max': est.plan_latency.max_us,
-                         'estimator_rejected': {k: v for k, v in
-                                                est.planner.counts.rejected.items() if v}}
-            return keys, samples, stats
+            yield p
         finally:
             p.close()
     finally:
         rclpy.try_shutdown(context=ctx)
+
+
+def run_in_process(domain, warm, stream, model_path=None, overrides=None):
+    """One fresh chain (the nodes, or the relays without ``model_path``): the warm-up, then the
+    measured stream. Returns (latency keys, samples, node statistics)."""
+    with warmed_chain(domain, warm, model_path, overrides) as p:
+        p.probe.reset()
+        p.probe.publish_stream(stream, stream.messages())
+        p.probe.wait_quiet()
+        keys, samples = latency_keys(p.probe)
+        stats = {}
+        if model_path is not None:
+            est = p.estimator
+            stats = {'estimator_update_us_mean': est.latency.mean_us,
+                     'estimator_update_us_max': est.latency.max_us,
+                     'estimator_plan_us_mean': est.plan_latency.mean_us,
+                     'estimator_plan_us_max': est.plan_latency.max_us,
+                     'estimator_rejected': {k: v for k, v in
+                                            est.planner.counts.rejected.items() if v}}
+        return keys, samples, stats
 
 
 # ---------------------------------------------------------------------------- cross-process
@@ -442,47 +451,36 @@ def run_sustained(domain, model_path, warm, g, rates, overrides=None):
     was taken by the observer, every observation it published reached the estimator unrejected,
     >= 95 % of the rate was published, and all was handled within DRAIN_BOUND_MS of the last
     pose."""
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=domain)
     runs = []
-    try:
-        p = InProcess(ctx, model_path, overrides)
-        try:
-            _wait_for(lambda: _discovered(p.probe), 10, 'discovery')
-            p.probe.publish_stream(warm, warm.messages())
-            p.probe.wait_quiet()
-            for rate in rates:
-                s = Stream()
-                s.add(*padded_wrist(g, seed=1, rate=rate))
-                ob, counts = p.observer, p.estimator.planner.counts
-                before = (ob.accepted, sum(ob.drop_counts.values()), ob.published['observations'],
-                          counts.received, counts.n_rejected)
-                first, last = p.probe.publish_stream(s, s.messages())
-                n = len(s.xyz)
+    with warmed_chain(domain, warm, model_path, overrides) as p:
+        for rate in rates:
+            s = Stream()
+            s.add(*padded_wrist(g, seed=1, rate=rate))
+            ob, counts = p.observer, p.estimator.planner.counts
+            before = (ob.accepted, sum(ob.drop_counts.values()), ob.published['observations'],
+                      counts.received, counts.n_rejected)
+            first, last = p.probe.publish_stream(s, s.messages())
+            n = len(s.xyz)
 
-                def handled():
-                    return (ob.accepted + sum(ob.drop_counts.values()) - before[0] - before[1]
-                            >= n and counts.received - before[3]
-                            >= ob.published['observations'] - before[2])
-                deadline = time.perf_counter() + 3.0
-                while not handled() and time.perf_counter() < deadline:
-                    time.sleep(0.0005)
-                drain_ms = (time.perf_counter() - last) * 1e3 if handled() else None
-                accepted = ob.accepted - before[0]
-                rejected = counts.n_rejected - before[4]
-                achieved = (n - 1) / (last - first) if last > first else float('nan')
-                ok = (accepted == n and rejected == 0 and achieved >= 0.95 * rate
-                      and drain_ms is not None and drain_ms <= DRAIN_BOUND_MS)
-                runs.append({'rate_hz': rate, 'published': n, 'achieved_hz': round(achieved, 1),
-                             'observer_accepted': accepted, 'estimator_rejected': rejected,
-                             'drain_ms': None if drain_ms is None else round(drain_ms, 2),
-                             'ok': bool(ok)})
-                p.probe.wait_quiet(quiet=0.3, timeout=2.0)
-                time.sleep(GAP_S)
-        finally:
-            p.close()
-    finally:
-        rclpy.try_shutdown(context=ctx)
+            def handled():
+                return (ob.accepted + sum(ob.drop_counts.values()) - before[0] - before[1]
+                        >= n and counts.received - before[3]
+                        >= ob.published['observations'] - before[2])
+            deadline = time.perf_counter() + 3.0
+            while not handled() and time.perf_counter() < deadline:
+                time.sleep(0.0005)
+            drain_ms = (time.perf_counter() - last) * 1e3 if handled() else None
+            accepted = ob.accepted - before[0]
+            rejected = counts.n_rejected - before[4]
+            achieved = (n - 1) / (last - first) if last > first else float('nan')
+            ok = (accepted == n and rejected == 0 and achieved >= 0.95 * rate
+                  and drain_ms is not None and drain_ms <= DRAIN_BOUND_MS)
+            runs.append({'rate_hz': rate, 'published': n, 'achieved_hz': round(achieved, 1),
+                         'observer_accepted': accepted, 'estimator_rejected': rejected,
+                         'drain_ms': None if drain_ms is None else round(drain_ms, 2),
+                         'ok': bool(ok)})
+            p.probe.wait_quiet(quiet=0.3, timeout=2.0)
+            time.sleep(GAP_S)
     best = 0
     for r in runs:
         if not r['ok']:
