@@ -16,6 +16,15 @@ from scipy.stats import multivariate_normal, norm
 from mixture_ip_ros.scenarios.synthetic import mixture_demos, random_spd, sample_trajectory
 
 
+def _feed(est, demo, fraction, step):
+    """Update ``est`` with every ``step``-th sample of the first ``fraction`` of ``demo``;
+    returns the indices of the samples used."""
+    idx = np.arange(0, int(fraction * len(demo.t)), step)
+    for i in idx:
+        est.update(demo.t[i], demo.observed[i])
+    return idx
+
+
 @pytest.fixture(scope='module')
 def model_and_demos():
     demos, labels, _, _ = mixture_demos(seed=1)
@@ -30,9 +39,7 @@ def test_recursive_log_evidence_equals_batch_eq18(model_and_demos, n_obs):
         model = MixtureIProMP(3, n_basis=8).fit(demos)
     est = OnlineEstimator(model, n_alpha=12, min_interval=0.0)
     demo = demos[4]
-    idx = np.arange(0, int(0.7 * len(demo.t)), 4)
-    for i in idx:
-        est.update(demo.t[i], demo.observed[i])
+    idx = _feed(est, demo, 0.7, 4)
     do = model.n_observed_ * model.n_basis
     for k in range(3):
         for m in range(0, 12, 3):
@@ -60,9 +67,7 @@ def test_prediction_equals_conditioning_the_map_hypothesis(model_and_demos):
     model, demos, _ = model_and_demos
     est = OnlineEstimator(model, n_alpha=12, min_interval=0.0)
     demo = demos[20]
-    idx = np.arange(0, int(0.5 * len(demo.t)), 5)
-    for i in idx:
-        est.update(demo.t[i], demo.observed[i])
+    idx = _feed(est, demo, 0.5, 5)
     k, a = est.map_hypothesis()
     z = np.linspace(0, 1, 11)
     out = est.predict(z)
@@ -234,9 +239,7 @@ def test_per_component_noise_online_equals_batch_eq18_with_each_components_noise
     assert model.observed_noise_var_.shape == (3, 2)
     est = OnlineEstimator(model, n_alpha=6, min_interval=0.0)
     demo = demos[5]
-    idx = np.arange(0, len(demo.t), 7)
-    for i in idx:
-        est.update(demo.t[i], demo.observed[i])
+    idx = _feed(est, demo, 1.0, 7)
     do = 2 * model.n_basis
     for k in range(3):
         for m in (0, 5):
@@ -252,9 +255,7 @@ def test_every_hypothesis_posterior_equals_dense_conditioning(model_and_demos):
     model, demos, _ = model_and_demos
     est = OnlineEstimator(model, n_alpha=7, min_interval=0.0)     # 21 columns: a partial group
     demo = demos[11]
-    idx = np.arange(0, int(0.6 * len(demo.t)), 7)
-    for i in idx:
-        est.update(demo.t[i], demo.observed[i])
+    idx = _feed(est, demo, 0.6, 7)
     do = model.n_observed_ * model.n_basis
     mu, sigma = est.mu, est.sigma
     for k in range(3):
@@ -411,9 +412,7 @@ def test_refined_alpha_is_the_vertex_of_the_batch_log_posterior_parabola(model_a
     model, demos, _ = model_and_demos
     est = OnlineEstimator(model, n_alpha=15, min_interval=0.0)
     demo = demos[25]
-    idx = np.arange(0, int(0.5 * len(demo.t)), 4)
-    for i in idx:
-        est.update(demo.t[i], demo.observed[i])
+    idx = _feed(est, demo, 0.5, 4)
     k, a = est.map_hypothesis()
     m = int(np.argmin(np.abs(est.alphas - a)))
     assert 0 < m < 14
