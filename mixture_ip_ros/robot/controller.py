@@ -137,14 +137,12 @@ class ComputedTorqueController:
         # through the careful path, which finds the culprit and holds.
         if q_ref is None:
             if self.holding and self.hold_position is not None:
-                tau = self._fast(q, qd, self.hold_position, self._zero, self._zero)
+                tau = self._fast(q, qd, self.hold_position, self._zero, self._zero, True)
                 if tau is not None:
                     return tau
         elif qd_ref is not None and qdd_ref is not None:
-            tau = self._fast(q, qd, q_ref, qd_ref, qdd_ref)
+            tau = self._fast(q, qd, q_ref, qd_ref, qdd_ref, False)
             if tau is not None:
-                self.holding = False
-                self.hold_position = None
                 return tau
         return self._compute_checked(q, qd, q_ref, qd_ref, qdd_ref)
 
@@ -192,23 +190,24 @@ class ComputedTorqueController:
                 fast = tau
             else:
                 if fast is not None:
-                    self._record_fast(fast, ctrl, holding)
+                    self._record_fast(fast, ctrl.copy(), holding)
                     fast = None
                 ctrl[:] = self.compute(q, qd) if holding else self.compute(q, qd, *refs[k])
             advance()
         if fast is not None:
-            self._record_fast(fast, ctrl, holding)
+            self._record_fast(fast, ctrl.copy(), holding)
 
     def _record_fast(self, tau, clipped, holding):
-        """The state compute's fast path leaves after the torque ``tau`` (clipped: ``clipped``)."""
+        """The state the fast path leaves after the torque ``tau``, applied as ``clipped`` (kept,
+        not copied); off a reference (``holding`` false) the hold ends."""
         self._active_fault = None
         self._last_raw = tau
-        self._last_safe = clipped.copy()
+        self._last_safe = clipped
         if not holding:
             self.holding = False
             self.hold_position = None
 
-    def _fast(self, q, qd, q_ref, qd_ref, qdd_ref):
+    def _fast(self, q, qd, q_ref, qd_ref, qdd_ref, holding):
         try:
             a = qdd_ref + self.kp * (q_ref - q) + self.kd * (qd_ref - qd)
             tau = pin.rnea(self._model, self._data, q, qd, a)
@@ -216,10 +215,8 @@ class ComputedTorqueController:
             return None
         if tau.shape != (self.dof,) or not math.isfinite(tau.dot(tau)):
             return None
-        self._active_fault = None
-        self._last_raw = tau
         clipped = tau.clip(self._neg_limit, self.effort_limit)
-        self._last_safe = clipped
+        self._record_fast(tau, clipped, holding)
         return clipped.copy()
 
     def _compute_checked(self, q, qd, q_ref, qd_ref, qdd_ref) -> np.ndarray:
