@@ -36,7 +36,7 @@ import numpy as np
 from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.core.interaction import trajectory_distribution
 from mixture_ip_ros.core.mixture import MixtureIProMP, controlled_rms, select_n_components
-from mixture_ip_ros.core.online import OnlineEstimator
+from mixture_ip_ros.core.online import OnlineEstimator, spaced
 from mixture_ip_ros.app.training import component_labels
 from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE
 from mixture_ip_ros.io.files import write_text_atomic
@@ -661,7 +661,7 @@ def decimated_rows(t, min_interval):
     each one at least ``min_interval`` after the last one absorbed (OnlineEstimator.admit)."""
     rows, last = [], None
     for i, ti in enumerate(t):
-        if last is None or ti - last >= min_interval - 1e-9:
+        if last is None or spaced(ti, last, min_interval):
             rows.append(i)
             last = ti
     return np.array(rows, dtype=int)

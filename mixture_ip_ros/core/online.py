@@ -38,6 +38,12 @@ def _logsumexp(a: np.ndarray) -> float:
     return float(np.log1p(s) + np.log(m) + a_max)
 
 
+def spaced(t: float, t_last: float, min_interval: float) -> bool:
+    """The decimation rule: whether a sample at ``t`` is at least ``min_interval`` after the
+    last one used, at ``t_last`` (stamps are ns: no float slack beyond 1 ns)."""
+    return t - t_last >= min_interval - 1e-9
+
+
 class OnlineEstimator:
     """Recursive p(k, alpha | D) for a fitted :class:`MixtureIProMP` (any layout: P >= 1
     observed DOFs, Q >= 0 controlled).
@@ -155,7 +161,7 @@ class OnlineEstimator:
         if self.t_last is not None:
             if t <= self.t_last:
                 raise ValueError(f'time must increase: {t} after {self.t_last}')
-            if t - self.t_last < self.min_interval - 1e-9:   # stamps are ns: no float slack
+            if not spaced(t, self.t_last, self.min_interval):
                 self.n_skipped += 1
                 self.t_seen = max(float(t), self.t_seen)
                 return False
