@@ -38,7 +38,8 @@ from visualization_msgs.msg import MarkerArray
 from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.core.stamps import stamp_to_ns
 from mixture_ip_ros.estimation.planner import OnlinePlanner, PlannerSettings
-from mixture_ip_ros.estimation.plans import PosteriorSummary, predicted_paths, predicted_wrist
+from mixture_ip_ros.estimation.plans import (JointLimits, PosteriorSummary, predicted_paths,
+                                             predicted_wrist)
 from mixture_ip_ros.estimation.records import LatencyStats
 from mixture_ip_ros.io.model_file import load_model
 from mixture_ip_ros.nodes import qos
@@ -48,7 +49,6 @@ from mixture_ip_ros.nodes.diagnostics import OK, WARN, PublishesDiagnostics, dia
 from mixture_ip_ros.nodes.managed import ManagedNode, run_node
 from mixture_ip_ros.nodes.markers import prediction_markers
 from mixture_ip_ros.nodes.params import autostart_param, finite_list, param, positive
-from mixture_ip_ros.estimation.plans import JointLimits
 from mixture_ip_ros.robot.description import (BASE_FRAME, DEFAULT_ROBOT, JOINT_NAMES,
                                               shipped_robots)
 from mixture_ip_ros.robot.kinematics import RobotKinematics
