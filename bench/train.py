@@ -3,8 +3,8 @@
 The bags are generated into a temporary folder (`mixture-ip generate --scenario box_assembly`
 defaults; not timed). Each run is a fresh process doing what `mixture-ip train bags/ --out
 model.npz` does: load the bags (load_s), then app.training.train_to_file with K chosen over
-1..6 (train_s): the calibrated held-out log-likelihood (heldout_s), the leave-one-out RMS at each
-K's floor (loo_s), both together selection_s, the final fit (fit_s), the novelty calibration
+1..6 (train_s): the calibrated held-out curves (heldout_s: the log-likelihood, and the controlled
+agent's RMS that sets each K's floor for leave-one-out), the leave-one-out RMS (loo_s), both together selection_s, the final fit (fit_s), the novelty calibration
 (novelty_s) and the save (save_s). n_fits counts every mixture fit; peak_rss_mb is the run's
 peak resident memory. Top-level keys are medians over the runs (the machine may be shared).
 
@@ -61,27 +61,34 @@ class Phases:
         setattr(owner, name, wrapper)
 
 
-def plain_heldout(demos, candidates, prior_scales, n_folds=5, progress=None, fold_seed=0,
-                  **params):
-    """calibrated_heldout_loglik by the straightforward loop (one fit per fold and floor)."""
+def plain_heldout(demos, candidates, fractions=(), prior_scales=(), n_folds=5, progress=None,
+                  fold_seed=0, **params):
+    """calibrated_heldout_curves (the held-out log-likelihood and, with a controlled agent, the
+    controlled agent's RMS) by the straightforward loop (one fit per fold and floor)."""
     import numpy as np
-    from mixture_ip_ros.core.mixture import MixtureIProMP, cv_folds
+    from mixture_ip_ros.core.mixture import MixtureIProMP, controlled_rms, cv_folds
     fold = cv_folds(len(demos), n_folds, fold_seed)
     scales = [float(s) for s in prior_scales]
     params = {k: v for k, v in params.items() if k != 'prior_scale'}
-    S = np.empty((len(scales), len(candidates), len(demos)))
+    shape = (len(scales), len(candidates), len(demos))
+    S = {'loglik': np.empty(shape), 'controlled_rms': np.empty(shape)}
     for b, scale in enumerate(scales):
         for a, K in enumerate(candidates):
             for f in range(fold.max() + 1):
                 test = np.flatnonzero(fold == f)
                 model = MixtureIProMP(n_components=K, prior_scale=scale, **params).fit(
                     [d for d, g in zip(demos, fold) if g != f])
-                S[b, a, test] = model.score_demonstrations([demos[i] for i in test])
-    mean = S.mean(axis=2)
-    best = np.argmax(mean, axis=0)
-    return {'scores': S[best, np.arange(len(candidates))],
-            'prior_scale': [scales[b] for b in best], 'prior_scales': scales,
-            'mean_by_scale': mean}
+                S['loglik'][b, a, test] = model.score_demonstrations([demos[i] for i in test])
+                S['controlled_rms'][b, a, test] = [controlled_rms(model, demos[i])
+                                                   for i in test]
+    out = {}
+    for name, scores in S.items():
+        mean = scores.mean(axis=2)
+        best = np.argmin(mean, axis=0) if name == 'controlled_rms' else np.argmax(mean, axis=0)
+        out[name] = {'scores': scores[best, np.arange(len(candidates))],
+                     'prior_scale': [scales[i] for i in best], 'prior_scales': scales,
+                     'mean_by_scale': mean}
+    return out
 
 
 def plain_loo(demos, candidates, observe='final', progress=None, **params):
@@ -101,9 +108,9 @@ def one_run(bags: Path, reference: bool) -> dict:
     from mixture_ip_ros.robot.description import load_description
     phases = Phases()
     if reference:
-        training.calibrated_heldout_loglik = plain_heldout
+        training.calibrated_heldout_curves = plain_heldout
         training.loo_rms_by_components = plain_loo
-    phases.wrap(training, 'calibrated_heldout_loglik', 'heldout_s')
+    phases.wrap(training, 'calibrated_heldout_curves', 'heldout_s')
     phases.wrap(training, 'loo_rms_by_components', 'loo_s')
     phases.wrap(training, 'calibrate_novelty', 'novelty_s')
     phases.wrap(training, 'save_model', 'save_s')

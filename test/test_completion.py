@@ -11,7 +11,7 @@ from mixture_ip_ros.core.basis import GaussianBasis
 from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.core.mixture import (COMPLETION_FRACTIONS, MixtureIProMP,
                                          calibrated_heldout_curves, calibrated_heldout_loglik,
-                                         cv_folds, selection_curve)
+                                         controlled_rms, cv_folds, selection_curve)
 from mixture_ip_ros.core.promp import (log_evidence, observation_stats, stack_stats,
                                        weight_posterior)
 from mixture_ip_ros.scenarios.synthetic import mixture_demos, random_spd
@@ -120,6 +120,41 @@ def test_completion_curves_equal_the_straightforward_loop():
     ll = calibrated_heldout_loglik(demos, candidates, scales, n_basis=8)
     assert np.allclose(cal['loglik']['scores'], ll['scores'], rtol=1e-12)
     assert cal['loglik']['prior_scale'] == ll['prior_scale']
+
+
+def test_controlled_rms_curve_equals_the_straightforward_loop():
+    """With a controlled agent the same fits also give the thesis's criterion (the controlled
+    agent predicted from the final observed position), each K at the floor it prefers."""
+    demos = mixture_demos(seed=5, n_obs=2, n_ctrl=2, counts=(8, 9, 7))[0]
+    candidates, scales = [1, 3], [1.0, 0.01]
+    cal = calibrated_heldout_curves(demos, candidates, (), scales, n_basis=8)
+    assert set(cal) == {'loglik', 'controlled_rms'}
+    fold = cv_folds(len(demos), 5, 0)
+    rms = np.empty((2, 2, len(demos)))
+    for b, scale in enumerate(scales):
+        for a, K in enumerate(candidates):
+            for f in range(5):
+                model = MixtureIProMP(K, n_basis=8, prior_scale=scale).fit(
+                    [d for d, g in zip(demos, fold) if g != f])
+                for i in np.flatnonzero(fold == f):
+                    rms[b, a, i] = controlled_rms(model, demos[i], 'final')
+    assert np.allclose(cal['controlled_rms']['mean_by_scale'], rms.mean(axis=2), rtol=1e-10)
+    best = np.argmin(rms.mean(axis=2), axis=0)
+    assert cal['controlled_rms']['prior_scale'] == [scales[i] for i in best]
+    assert np.allclose(cal['controlled_rms']['scores'], rms[best, range(2)], rtol=1e-10)
+    # A single agent has no such curve.
+    single = mixture_demos(seed=5, n_obs=2, n_ctrl=0, counts=(8, 9, 7))[0]
+    assert set(calibrated_heldout_curves(single, [1], (), [1.0], n_basis=8)) == {'loglik'}
+
+
+@pytest.mark.parametrize('noise', ['tied', 'per_component'])
+def test_batched_final_rms_equals_controlled_rms(noise):
+    from mixture_ip_ros.core.mixture import _final_rms, _final_views
+    demos = mixture_demos(seed=3, n_obs=3, n_ctrl=2, counts=(8, 9, 7))[0]
+    model = MixtureIProMP(3, n_basis=8, noise=noise, observation_noise=0.01).fit(demos[4:])
+    view = _final_views(model.basis_, demos)
+    got = _final_rms(model, view, np.arange(6))
+    assert np.allclose(got, [controlled_rms(model, d, 'final') for d in demos[:6]], rtol=1e-9)
 
 
 def test_completion_and_heldout_loglik_on_ten_sampled_sets_of_three_patterns():

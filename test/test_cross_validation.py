@@ -98,11 +98,13 @@ def test_heldout_curves_equal_the_straightforward_loop(n_ctrl):
 
 
 def test_leave_one_out_curve_equals_the_straightforward_loop():
+    # To round-off: the curve conditions on the final sample in the Kalman form (a P x P
+    # innovation), controlled_rms in the information form.
     demos = occluded(mixture_demos(seed=5, n_obs=2, n_ctrl=3, counts=(6, 7, 5))[0])
     candidates = [1, 2, 3, 4]
     for params in ({'n_basis': 8}, {'n_basis': 8, 'prior_scale': 0.3, 'noise': 'per_component'}):
         assert np.allclose(loo_rms_by_components(demos, candidates, **params),
-                           plain_loo(demos, candidates, **params), rtol=1e-12, atol=0)
+                           plain_loo(demos, candidates, **params), rtol=1e-9, atol=0)
 
 
 def test_em_stops_when_the_responsibilities_repeat_with_the_parameters_of_the_full_loop():

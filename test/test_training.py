@@ -26,3 +26,20 @@ def test_em_training_chooses_k_on_regression_fits_and_fits_the_model_by_em():
     comp = model.resp_.argmax(axis=1)
     assert all(len(set(comp[labels == k])) == 1 for k in range(3))
     assert len(set(comp)) == 3
+
+
+def test_leave_one_out_floor_is_the_one_its_own_criterion_prefers():
+    """The covariance floor of the leave-one-out curve (and of the model) is the one that
+    predicts the controlled agent best on the held-out folds, not the held-out likelihood's."""
+    demos = mixture_demos(seed=0)[0]
+    model, info = train(demos, candidates=range(1, 5), n_basis=8)
+    sel = info['selection']
+    from mixture_ip_ros.core.mixture import calibrated_heldout_curves, loo_rms_by_components
+    curves = calibrated_heldout_curves(demos, [1, 2, 3, 4], (), n_basis=8, method='regression')
+    assert sel['loo_rms']['prior_scale'] == curves['controlled_rms']['prior_scale']
+    assert sel['heldout_loglik']['prior_scale'] == curves['loglik']['prior_scale']
+    K = info['n_components']
+    assert model.prior_scale == sel['prior_scale'] == curves['controlled_rms']['prior_scale'][K - 1]
+    rms = loo_rms_by_components(demos, [K], n_basis=8, method='regression',
+                                prior_scale=model.prior_scale)
+    assert np.allclose(sel['loo_rms']['mean'][K - 1], rms.mean(), rtol=1e-12)

@@ -4,9 +4,11 @@ layout: the observed agent with >= 1 DOF, the controlled agent with >= 0.
 K, unless given, is chosen from candidates by two criteria, each a curve over K:
 - the cross-validated held-out log-likelihood of the demonstrations (both agents, phase known),
   for every layout, each K at the covariance floor its held-out likelihood prefers
-  (:func:`core.mixture.calibrated_heldout_loglik`);
+  (:func:`core.mixture.calibrated_heldout_curves`);
 - the thesis's leave-one-out RMS of the controlled agent given the final observed position
-  (Figs. 8/10), where there is a controlled agent, each K fitted with that floor.
+  (Figs. 8/10), where there is a controlled agent, each K at the floor that criterion prefers
+  on the same cross-validated fits (what predicts the robot best, not what describes the
+  demonstrations best).
 ``criterion='auto'`` decides by leave-one-out where there is a controlled agent (the thesis) and
 by the held-out log-likelihood otherwise; both curves, the choice, the floor and whether the
 deciding curve has a clear optimum go into the training summary. The model is fitted with the
@@ -21,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from mixture_ip_ros.core.demonstration import Layout
-from mixture_ip_ros.core.mixture import (PRIOR_SCALES, MixtureIProMP, calibrated_heldout_loglik,
+from mixture_ip_ros.core.mixture import (PRIOR_SCALES, MixtureIProMP, calibrated_heldout_curves,
                                          loo_rms_by_components, selection_curve)
 from mixture_ip_ros.core.novelty import calibrate as calibrate_novelty
 from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE, bag_layout
@@ -94,8 +96,9 @@ def train(demos, *, n_components=None, candidates=range(1, 7), criterion: str = 
         n_cal = len(scales) * len(ll_candidates) * int(min(n_folds, len(demos)))
         loo_candidates = [int(k) for k in candidates if k <= len(demos) - 1]
         total = n_cal + (len(loo_candidates) * len(demos) if has_controlled else 0)
-        cal = calibrated_heldout_loglik(demos, ll_candidates, scales, n_folds,
-                                        _offset_progress(progress, 0, total), **curve_params)
+        curves = calibrated_heldout_curves(demos, ll_candidates, (), scales, n_folds,
+                                           _offset_progress(progress, 0, total), **curve_params)
+        cal = curves['loglik']
         ll = cal['scores']
         selection['heldout_loglik'] = {
             **_curve_summary(ll_candidates, ll, selection_curve(ll, higher_is_better=True,
@@ -105,21 +108,26 @@ def train(demos, *, n_components=None, candidates=range(1, 7), criterion: str = 
             'mean_by_prior_scale': cal['mean_by_scale'].tolist()}
         floor = dict(zip(ll_candidates, cal['prior_scale']))
         if has_controlled:
+            floor_loo = dict(zip(ll_candidates, curves['controlled_rms']['prior_scale']))
             if not loo_candidates:
                 raise ValueError('not enough demonstrations for leave-one-out')
             rms = np.vstack([
                 loo_rms_by_components(demos, [K], 'final',
                                       _offset_progress(progress, n_cal + a * len(demos), total),
-                                      **{**curve_params, 'prior_scale': floor.get(K, scales[0])})
+                                      **{**curve_params,
+                                         'prior_scale': floor_loo.get(K, scales[0])})
                 for a, K in enumerate(loo_candidates)])
-            selection['loo_rms'] = _curve_summary(loo_candidates, rms, selection_curve(rms))
+            selection['loo_rms'] = {
+                **_curve_summary(loo_candidates, rms, selection_curve(rms)),
+                'prior_scale': [floor_loo.get(K, scales[0]) for K in loo_candidates]}
             info['loo_method'] = 'regression'
             info['loo_candidates'] = loo_candidates
             info['loo_rms_mean'] = rms.mean(axis=1).tolist()
             info['loo_rms_std'] = rms.std(axis=1).tolist()
         chosen = selection['loo_rms' if criterion == 'loo' else 'heldout_loglik']
         n_components = chosen['chosen']
-        params = {**params, 'prior_scale': floor.get(n_components, scales[0])}
+        floors = floor_loo if criterion == 'loo' else floor
+        params = {**params, 'prior_scale': floors.get(n_components, scales[0])}
         selection.update(chosen=int(n_components), clear_optimum=chosen['clear_optimum'],
                          note=chosen['note'], prior_scale=params['prior_scale'])
         if not chosen['clear_optimum']:
