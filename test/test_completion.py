@@ -94,13 +94,17 @@ def test_batched_posterior_means_equal_weight_posterior():
         assert np.allclose(pi, want_mean, rtol=1e-9, atol=1e-12)
 
 
-def test_completion_curves_equal_the_straightforward_loop():
-    demos = mixture_demos(seed=5, n_obs=2, n_ctrl=0, counts=(8, 9, 7))[0]
-    candidates, scales = [1, 2, 3], [1.0, 0.1]
+@pytest.mark.parametrize('n_ctrl', [0, 2])
+def test_completion_curves_equal_the_straightforward_loop(n_ctrl):
+    """Every held-out curve from the same fits; with a controlled agent also the thesis's
+    criterion (the controlled agent predicted from the final observed position)."""
+    demos = mixture_demos(seed=5, n_obs=2, n_ctrl=n_ctrl, counts=(8, 9, 7))[0]
+    candidates, scales = [1, 2, 3], [1.0, 0.01]
     cal = calibrated_heldout_curves(demos, candidates, (0.3, 0.6), scales, n_basis=8)
+    assert set(cal) == {'loglik', 'completion', 'completion_rms'} | (
+        {'controlled_rms'} if n_ctrl else set())
     fold = cv_folds(len(demos), 5, 0)
-    density = np.empty((2, 3, len(demos)))
-    rms = np.empty((2, 3, len(demos)))
+    density, rms, ctrl = (np.empty((2, 3, len(demos))) for _ in range(3))
     for b, scale in enumerate(scales):
         for a, K in enumerate(candidates):
             for f in range(5):
@@ -109,42 +113,21 @@ def test_completion_curves_equal_the_straightforward_loop():
                 test = np.flatnonzero(fold == f)
                 dd, rr = model.score_completion([demos[i] for i in test], (0.3, 0.6))
                 density[b, a, test], rms[b, a, test] = dd.mean(axis=1), rr.mean(axis=1)
-    assert np.allclose(cal['completion']['mean_by_scale'], density.mean(axis=2), rtol=1e-10)
-    assert np.allclose(cal['completion_rms']['mean_by_scale'], rms.mean(axis=2), rtol=1e-10)
+                if n_ctrl:
+                    ctrl[b, a, test] = [controlled_rms(model, demos[i]) for i in test]
     best = np.argmax(density.mean(axis=2), axis=0)
     assert cal['completion']['prior_scale'] == [scales[i] for i in best]
     assert np.allclose(cal['completion']['scores'], density[best, range(3)], rtol=1e-10)
-    best = np.argmin(rms.mean(axis=2), axis=0)                  # lower RMS is better
-    assert cal['completion_rms']['prior_scale'] == [scales[i] for i in best]
+    for name, S in (('completion_rms', rms), ('controlled_rms', ctrl))[:1 + bool(n_ctrl)]:
+        assert np.allclose(cal[name]['mean_by_scale'], S.mean(axis=2), rtol=1e-10)
+        best = np.argmin(S.mean(axis=2), axis=0)                  # lower RMS is better
+        assert cal[name]['prior_scale'] == [scales[i] for i in best]
+        assert np.allclose(cal[name]['scores'], S[best, range(3)], rtol=1e-10)
+    assert np.allclose(cal['completion']['mean_by_scale'], density.mean(axis=2), rtol=1e-10)
     # The held-out log-likelihood of the same fits is the one calibrated_heldout_loglik gives.
     ll = calibrated_heldout_loglik(demos, candidates, scales, n_basis=8)
     assert np.allclose(cal['loglik']['scores'], ll['scores'], rtol=1e-12)
     assert cal['loglik']['prior_scale'] == ll['prior_scale']
-
-
-def test_controlled_rms_curve_equals_the_straightforward_loop():
-    """With a controlled agent the same fits also give the thesis's criterion (the controlled
-    agent predicted from the final observed position), each K at the floor it prefers."""
-    demos = mixture_demos(seed=5, n_obs=2, n_ctrl=2, counts=(8, 9, 7))[0]
-    candidates, scales = [1, 3], [1.0, 0.01]
-    cal = calibrated_heldout_curves(demos, candidates, (), scales, n_basis=8)
-    assert set(cal) == {'loglik', 'controlled_rms'}
-    fold = cv_folds(len(demos), 5, 0)
-    rms = np.empty((2, 2, len(demos)))
-    for b, scale in enumerate(scales):
-        for a, K in enumerate(candidates):
-            for f in range(5):
-                model = MixtureIProMP(K, n_basis=8, prior_scale=scale).fit(
-                    [d for d, g in zip(demos, fold) if g != f])
-                for i in np.flatnonzero(fold == f):
-                    rms[b, a, i] = controlled_rms(model, demos[i], 'final')
-    assert np.allclose(cal['controlled_rms']['mean_by_scale'], rms.mean(axis=2), rtol=1e-10)
-    best = np.argmin(rms.mean(axis=2), axis=0)
-    assert cal['controlled_rms']['prior_scale'] == [scales[i] for i in best]
-    assert np.allclose(cal['controlled_rms']['scores'], rms[best, range(2)], rtol=1e-10)
-    # A single agent has no such curve.
-    single = mixture_demos(seed=5, n_obs=2, n_ctrl=0, counts=(8, 9, 7))[0]
-    assert set(calibrated_heldout_curves(single, [1], (), [1.0], n_basis=8)) == {'loglik'}
 
 
 @pytest.mark.parametrize('noise', ['tied', 'per_component'])
