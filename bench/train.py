@@ -4,8 +4,9 @@ The bags are generated into a temporary folder (`mixture-ip generate --scenario 
 defaults; not timed). Each run is a fresh process doing what `mixture-ip train bags/ --out
 model.npz` does: load the bags (load_s), then app.training.train_to_file with K chosen over
 1..6 (train_s): the calibrated held-out curves (heldout_s: the log-likelihood, and the controlled
-agent's RMS that sets each K's floor for leave-one-out), the leave-one-out RMS (loo_s), both together selection_s, the final fit (fit_s), the novelty calibration
-(novelty_s) and the save (save_s). n_fits counts every mixture fit; peak_rss_mb is the run's
+agent's RMS that sets each K's floor for leave-one-out), the leave-one-out RMS (loo_s), both
+together selection_s, the final fit (fit_s), the novelty calibration (novelty_s) and the save
+(save_s). n_fits counts every mixture fit; peak_rss_mb is the run's
 peak resident memory. Top-level keys are medians over the runs (the machine may be shared).
 
 ``reference`` is the same path with the K curves computed by the straightforward loop, one
@@ -138,7 +139,7 @@ def one_run(bags: Path, reference: bool) -> dict:
             'n_fits': phases.calls.get('n_fits', 0), 'n_demonstrations': len(demos),
             'n_skipped': len(skipped), 'chosen': sel['chosen'], 'prior_scale': sel['prior_scale'],
             'heldout_mean_by_prior_scale': sel['heldout_loglik']['mean_by_prior_scale'],
-            'loo_rms_mean': info['loo_rms_mean']}
+            'loo_rms_mean': info['loo_rms_mean'], 'loo_prior_scale': sel['loo_rms']['prior_scale']}
 
 
 def run_in_process(bags: Path, reference: bool) -> dict:
@@ -157,6 +158,7 @@ def medians(runs) -> dict:
 def same_curves(a: dict, b: dict, rtol: float = 1e-9) -> bool:
     import numpy as np
     return (a['chosen'] == b['chosen'] and a['prior_scale'] == b['prior_scale']
+            and a['loo_prior_scale'] == b['loo_prior_scale']
             and np.allclose(a['heldout_mean_by_prior_scale'], b['heldout_mean_by_prior_scale'],
                             rtol=rtol, atol=0)
             and np.allclose(a['loo_rms_mean'], b['loo_rms_mean'], rtol=rtol, atol=0))

@@ -129,3 +129,13 @@ def test_training_keeps_three_patterns_on_box_assembly():
     assert sel['chosen'] == 3 and sel['clear_optimum']
     assert sel['heldout_loglik']['chosen'] == 3 and sel['loo_rms']['chosen'] == 3
     assert model.n_components == 3 and model.prior_scale == sel['prior_scale']
+
+
+def test_heldout_loglik_of_em_data_with_a_robot_never_observed():
+    """The likelihood curve scores nothing of the controlled agent's prediction, so EM data
+    where one demonstration never observed the controlled agent gives finite curves."""
+    demos = mixture_demos(seed=5, n_obs=2, n_ctrl=2, counts=(6, 6, 6))[0]
+    blind = demos[3]
+    demos[3] = Demonstration(blind.t, blind.observed, np.full_like(blind.controlled, np.nan))
+    cal = calibrated_heldout_loglik(demos, [1, 2], [1.0], n_basis=6, method='em', max_iter=5)
+    assert np.all(np.isfinite(cal['scores']))

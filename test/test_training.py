@@ -43,3 +43,12 @@ def test_leave_one_out_floor_is_the_one_its_own_criterion_prefers():
     rms = loo_rms_by_components(demos, [K], n_basis=8, method='regression',
                                 prior_scale=model.prior_scale)
     assert np.allclose(sel['loo_rms']['mean'][K - 1], rms.mean(), rtol=1e-12)
+    # Leave-one-out trains on more demonstrations than a held-out fold: a K only it can fit
+    # takes the floor of the largest K the folds calibrated.
+    few = demos[::4]
+    _, info = train(few, candidates=range(1, len(few)), n_basis=8)
+    held = info['selection']['heldout_loglik']['candidates']
+    loo = info['selection']['loo_rms']
+    assert loo['candidates'][-1] > held[-1]
+    assert loo['prior_scale'][len(held):] == [loo['prior_scale'][len(held) - 1]] * (
+        len(loo['candidates']) - len(held))

@@ -6,9 +6,9 @@ K, unless given, is chosen from candidates by two criteria, each a curve over K:
   for every layout, each K at the covariance floor its held-out likelihood prefers
   (:func:`core.mixture.calibrated_heldout_curves`);
 - the thesis's leave-one-out RMS of the controlled agent given the final observed position
-  (Figs. 8/10), where there is a controlled agent, each K at the floor that criterion prefers
-  on the same cross-validated fits (what predicts the robot best, not what describes the
-  demonstrations best).
+  (Figs. 8/10), where there is a controlled agent, each K at the floor that predicts the
+  controlled agent best on the same cross-validated fits among the floors whose held-out
+  likelihood is not significantly worse (:func:`core.mixture.calibrated_heldout_curves`).
 ``criterion='auto'`` decides by leave-one-out where there is a controlled agent (the thesis) and
 by the held-out log-likelihood otherwise; both curves, the choice, the floor and whether the
 deciding curve has a clear optimum go into the training summary. The model is fitted with the
@@ -108,18 +108,21 @@ def train(demos, *, n_components=None, candidates=range(1, 7), criterion: str = 
             'mean_by_prior_scale': cal['mean_by_scale'].tolist()}
         floor = dict(zip(ll_candidates, cal['prior_scale']))
         if has_controlled:
-            floor_loo = dict(zip(ll_candidates, curves['controlled_rms']['prior_scale']))
+            # A K too large for the held-out folds (leave-one-out trains on one more
+            # demonstration) takes the floor of the largest K they calibrated.
+            calibrated = dict(zip(ll_candidates, curves['controlled_rms']['prior_scale']))
+            floor_loo = {K: calibrated[max(k for k in ll_candidates if k <= K)]
+                         for K in loo_candidates}
             if not loo_candidates:
                 raise ValueError('not enough demonstrations for leave-one-out')
             rms = np.vstack([
                 loo_rms_by_components(demos, [K], 'final',
                                       _offset_progress(progress, n_cal + a * len(demos), total),
-                                      **{**curve_params,
-                                         'prior_scale': floor_loo.get(K, scales[0])})
+                                      **{**curve_params, 'prior_scale': floor_loo[K]})
                 for a, K in enumerate(loo_candidates)])
             selection['loo_rms'] = {
                 **_curve_summary(loo_candidates, rms, selection_curve(rms)),
-                'prior_scale': [floor_loo.get(K, scales[0]) for K in loo_candidates]}
+                'prior_scale': [floor_loo[K] for K in loo_candidates]}
             info['loo_method'] = 'regression'
             info['loo_candidates'] = loo_candidates
             info['loo_rms_mean'] = rms.mean(axis=1).tolist()
@@ -127,7 +130,7 @@ def train(demos, *, n_components=None, candidates=range(1, 7), criterion: str = 
         chosen = selection['loo_rms' if criterion == 'loo' else 'heldout_loglik']
         n_components = chosen['chosen']
         floors = floor_loo if criterion == 'loo' else floor
-        params = {**params, 'prior_scale': floors.get(n_components, scales[0])}
+        params = {**params, 'prior_scale': floors[n_components]}
         selection.update(chosen=int(n_components), clear_optimum=chosen['clear_optimum'],
                          note=chosen['note'], prior_scale=params['prior_scale'])
         if not chosen['clear_optimum']:
