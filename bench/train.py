@@ -85,7 +85,19 @@ def plain_heldout(demos, candidates, fractions=(), prior_scales=(), n_folds=5, p
     out = {}
     for name, scores in S.items():
         mean = scores.mean(axis=2)
-        best = np.argmin(mean, axis=0) if name == 'controlled_rms' else np.argmax(mean, axis=0)
+        if name == 'controlled_rms':
+            # the lowest RMS among the floors whose log-likelihood is within two paired
+            # standard errors of the best floor's
+            best = []
+            for a in range(len(candidates)):
+                ll = S['loglik'][:, a]
+                top = ll[np.argmax(ll.mean(axis=1))]
+                allowed = [b for b in range(len(scales)) if (top - ll[b]).mean()
+                           <= 2 * (top - ll[b]).std(ddof=1) / np.sqrt(len(demos))]
+                best.append(min(allowed, key=lambda b: mean[b, a]))
+            best = np.array(best)
+        else:
+            best = np.argmax(mean, axis=0)
         out[name] = {'scores': scores[best, np.arange(len(candidates))],
                      'prior_scale': [scales[i] for i in best], 'prior_scales': scales,
                      'mean_by_scale': mean}
