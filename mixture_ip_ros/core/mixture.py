@@ -814,13 +814,13 @@ def _heldout_scores(demonstrations, candidates, scales, n_folds, progress, fold_
     data = _prepare_for_cv(demos, params)
     shape = (len(scales), len(candidates), len(demos))
     out = {'loglik': np.empty(shape)}
+    basis = GaussianBasis(params.get('n_basis', _DEFAULT_N_BASIS))
     if controlled and demos[0].n_controlled_dofs:
         out['controlled_rms'] = np.empty(shape)
-        final = _final_views(GaussianBasis(params.get('n_basis', _DEFAULT_N_BASIS)), demos)
+        final = _final_views(basis, demos)
     if fractions:
         out['completion'], out['completion_rms'] = np.empty(shape), np.empty(shape)
-        beginnings = _beginning_stats(GaussianBasis(params.get('n_basis', _DEFAULT_N_BASIS)),
-                                      demos, _checked_fractions(fractions))
+        beginnings = _beginning_stats(basis, demos, _checked_fractions(fractions))
     done, total = 0, len(scales) * len(candidates) * (fold.max() + 1)
     for f in range(fold.max() + 1):
         train = data.take(fold != f)
@@ -921,8 +921,9 @@ def calibrated_heldout_curves(demonstrations, candidates, fractions=COMPLETION_F
     for name, S in scores.items():
         if name == 'controlled_rms':
             mean = np.nanmean(S, axis=2)
-            best = np.argmin(np.where(_not_significantly_worse(scores['loglik']), mean, np.inf),
-                             axis=0)
+            allowed = np.column_stack([_not_significantly_worse(scores['loglik'][:, a])
+                                       for a in range(len(candidates))])
+            best = np.argmin(np.where(allowed, mean, np.inf), axis=0)
         else:
             mean = S.mean(axis=2)
             best = (np.argmin(mean, axis=0) if name.endswith('_rms')
@@ -933,14 +934,14 @@ def calibrated_heldout_curves(demonstrations, candidates, fractions=COMPLETION_F
     return out
 
 
-def _not_significantly_worse(S):
-    """(scales, candidates) mask of the floors whose held-out log-likelihoods ``S`` (scales,
-    candidates, n) are within two paired standard errors of the best floor's, per candidate."""
-    best = np.argmax(S.mean(axis=2), axis=0)
-    d = S[best, np.arange(S.shape[1])][None] - S                     # >= 0 on average
-    n = S.shape[2]
-    se = d.std(axis=2, ddof=1) / np.sqrt(n) if n > 1 else np.zeros(d.shape[:2])
-    return d.mean(axis=2) <= 2 * se
+def _not_significantly_worse(g):
+    """Mask of the rows of ``g`` (options, n; per-demonstration scores, higher is better) whose
+    paired difference to the best row is within two standard errors: the options the data
+    cannot tell from the best."""
+    d = g[np.argmax(g.mean(axis=1))] - g
+    n = g.shape[1]
+    se = d.std(axis=1, ddof=1) / np.sqrt(n) if n > 1 else np.zeros(len(g))
+    return d.mean(axis=1) <= 2 * se
 
 
 def select_n_components(scores, higher_is_better: bool = False, paired: bool = False):
@@ -976,7 +977,7 @@ def selection_curve(scores, higher_is_better: bool = False, paired: bool = False
     se = np.array([se_of(r) for r in s])
     best = int(np.argmax(g.mean(axis=1)))
     if paired:
-        within = [(g[best] - g[a]).mean() <= 2 * se_of(g[best] - g[a]) for a in range(len(s))]
+        within = _not_significantly_worse(g)
     else:
         within = g.mean(axis=1) >= g[best].mean() - se[best]
     index = int(np.flatnonzero(within)[0])
