@@ -27,10 +27,12 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 import numpy as np  # noqa: E402
 
-from mixture_ip_ros.app.evaluation import (GESTURE_FRACTIONS, majority_labels,  # noqa: E402
-                                           online_components, sklearn_gmm_accuracy)
-from mixture_ip_ros.core.mixture import (MixtureIProMP, calibrated_heldout_curves,  # noqa: E402
-                                         cv_folds, selection_curve)
+from mixture_ip_ros.app.evaluation.baselines import sklearn_gmm_accuracy  # noqa: E402
+from mixture_ip_ros.app.evaluation.common import (majority_labels,  # noqa: E402
+                                                  online_components)
+from mixture_ip_ros.app.evaluation.gestures import GESTURE_FRACTIONS  # noqa: E402
+from mixture_ip_ros.core.mixture import MixtureIProMP  # noqa: E402
+from mixture_ip_ros.core.selection import calibrated_heldout_curves, cv_folds, selection_curve  # noqa: E402
 from mixture_ip_ros.scenarios.gestures import gesture_demonstrations  # noqa: E402
 
 CANDIDATES = list(range(1, 16))

@@ -4,7 +4,7 @@
 gesture of each person per fold; the test split is never read), accuracy in % of naming the
 person after 30/50/70/100 % of the recording, for three cuts of every recording:
 - whole: as the archive cut it (what scenarios.gestures uses);
-- onset: from the movement onset of core.segmentation.segment_rest_deviation to the end;
+- onset: from the movement onset of segment_rest_deviation (bench/_common.py) to the end;
 - onset_end: from that onset to its end.
 Methods: the supervised mixture (one component per person) online with the phase unknown and
 with the phase known (the same decimated samples), and the per-class ProMP baseline.
@@ -20,11 +20,13 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 import numpy as np  # noqa: E402
 
-from mixture_ip_ros.app.evaluation import (GESTURE_FRACTIONS, PerClassProMP,  # noqa: E402
-                                           online_components, phase_known_components)
+from _common import segment_rest_deviation  # noqa: E402
+from mixture_ip_ros.app.evaluation.baselines import PerClassProMP  # noqa: E402
+from mixture_ip_ros.app.evaluation.common import (online_components,  # noqa: E402
+                                                  phase_known_components)
+from mixture_ip_ros.app.evaluation.gestures import GESTURE_FRACTIONS  # noqa: E402
 from mixture_ip_ros.core.demonstration import Demonstration  # noqa: E402
 from mixture_ip_ros.core.mixture import MixtureIProMP  # noqa: E402
-from mixture_ip_ros.core.segmentation import segment_rest_deviation  # noqa: E402
 from mixture_ip_ros.scenarios.gestures import gesture_demonstrations  # noqa: E402
 
 

@@ -57,15 +57,14 @@ import numpy as np  # noqa: E402
 import rclpy  # noqa: E402
 from rclpy.context import Context  # noqa: E402
 from rclpy.node import Node  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
-import yaml  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from geometry_msgs.msg import PointStamped, PoseStamped  # noqa: E402
 from std_msgs.msg import Header  # noqa: E402
 from trajectory_msgs.msg import JointTrajectory  # noqa: E402
 
+from _common import (ESTIMATOR_PARAMS, ESTIMATOR_YAML, EVERY_POSE, GAP_S,  # noqa: E402
+                     OBSERVER_PARAMS, OBSERVER_YAML, Stream, as_parameters, padded_wrist)
 from mixture_ip_ros.app.training import train_to_file  # noqa: E402
-from mixture_ip_ros.core.share import config_path  # noqa: E402
 from mixture_ip_ros.core.stamps import ns_to_parts, stamp_to_ns  # noqa: E402
 from mixture_ip_ros.nodes import qos  # noqa: E402
 from mixture_ip_ros.nodes.cdr import JointTrajectoryEncoder  # noqa: E402
@@ -73,35 +72,13 @@ from mixture_ip_ros.nodes.estimator_node import EstimatorNode  # noqa: E402
 from mixture_ip_ros.nodes.observer_node import ObserverNode  # noqa: E402
 from mixture_ip_ros.nodes.spinning import spin_in_thread, spin_until_shutdown  # noqa: E402
 from mixture_ip_ros.robot.description import JOINT_NAMES  # noqa: E402
-from mixture_ip_ros.scenarios.generated import MOCAP_NOISE, box_assembly  # noqa: E402
+from mixture_ip_ros.scenarios.box_assembly import box_assembly  # noqa: E402
 
 BIN = Path(sys.executable).parent
-# Stamp and wall pause between replayed interactions: a silence (the observer's 'gap'). Longer
-# than the observer's max_backdate (2 s), so that the dating of the next onset sees none of the
-# previous interaction's samples, which end elsewhere (core.segmentation fits the positions of
-# the last max_backdate seconds, across a gap too).
-GAP_S = 2.5
-REST_PAD_S = 0.3                    # extra rest after each demo so every end is confirmed
 STEADY_AFTER_S = 1.0                # poses this long after the onset event: steady state
 DRAIN_BOUND_MS = 50.0               # sustained: everything handled this soon after the last pose
-EVERY_POSE = {'min_interval': 0.0, 'replan_rate_hz': 200.0}
 SCALING_COMPONENTS = (3, 6, 12)
 SCALING_ALPHAS = (50, 100)
-OBSERVER_YAML = config_path('observer.yaml')
-ESTIMATOR_YAML = config_path('estimator.yaml')
-
-
-def yaml_params(path, node):
-    with open(path) as f:
-        return yaml.safe_load(f)[node]['ros__parameters']
-
-
-OBSERVER_PARAMS = yaml_params(OBSERVER_YAML, 'observer_node')
-ESTIMATOR_PARAMS = yaml_params(ESTIMATOR_YAML, 'estimator_node')
-
-
-def as_parameters(d):
-    return [Parameter(k, value=v) for k, v in d.items()]
 
 
 def ms_stats(seconds, prefix, suffix=''):
@@ -113,47 +90,6 @@ def ms_stats(seconds, prefix, suffix=''):
                                                          a.max()))))
 
 
-# ---------------------------------------------------------------------------- streams
-class Stream:
-    """Poses to publish: wall offsets (s) and positions (stamped when published)."""
-
-    def __init__(self):
-        self.offsets, self.xyz = [], []
-
-    def add(self, t, xyz):
-        """One interaction's samples, ``t`` seconds from its first sample, after a pause."""
-        start = self.offsets[-1] + GAP_S if self.offsets else 0.0
-        for ti, p in zip(t.tolist(), xyz.tolist()):
-            self.offsets.append(start + ti)
-            self.xyz.append(p)
-
-    def messages(self):
-        msgs = []
-        for x, y, z in self.xyz:
-            m = PoseStamped()
-            m.header.frame_id = 'world'
-            m.pose.position.x, m.pose.position.y, m.pose.position.z = x, y, z
-            m.pose.orientation.w = 1.0
-            msgs.append(m)
-        return msgs
-
-
-def padded_wrist(g, seed, rate=None):
-    """A demo's wrist samples (from its recording start) plus REST_PAD_S of rest (noise seeded
-    by ``seed``); resampled to ``rate`` Hz (linear interpolation) if given."""
-    rng = np.random.default_rng(seed)
-    t, xyz = g.wrist_t, g.wrist_xyz
-    dt = float(np.median(np.diff(t)))
-    n = int(round(REST_PAD_S / dt))
-    t = np.concatenate([t, t[-1] + dt * np.arange(1, n + 1)])
-    xyz = np.vstack([xyz, xyz[-10:].mean(axis=0) + rng.normal(0.0, MOCAP_NOISE, (n, 3))])
-    if rate is not None:
-        tr = np.arange(0.0, t[-1], 1.0 / rate)
-        xyz = np.column_stack([np.interp(tr, t, xyz[:, j]) for j in range(3)])
-        t = tr
-    return t, xyz
-
-
 # ---------------------------------------------------------------------------- probe
 class Probe(Node):
     """Publishes the mocap poses; records the arrival of every trajectory (its stamp: what
@@ -163,7 +99,7 @@ class Probe(Node):
         super().__init__('latency_probe', **kwargs)
         self.pose_pub = self.create_publisher(PoseStamped, '/mocap/wrist', qos.sensor_data(100))
         self.traj_sub = self.create_subscription(
-            JointTrajectory, '/iiwa/joint_trajectory', self._on_traj, qos.reliable(1000),
+            JointTrajectory, 'joint_trajectory', self._on_traj, qos.reliable(1000),
             raw=True)
         self.create_subscription(Header, '/observer/event', self._on_event, qos.reliable(100))
         self.diagnostics = None
@@ -273,7 +209,7 @@ class TrajectoryRelay(Node):
 
     def __init__(self, **kwargs):
         super().__init__('relay_trajectory', **kwargs)
-        self.pub = self.create_publisher(JointTrajectory, '/iiwa/joint_trajectory',
+        self.pub = self.create_publisher(JointTrajectory, 'joint_trajectory',
                                          qos.reliable(10))
         n = int(ESTIMATOR_PARAMS['n_points'])
         self.encoder = JointTrajectoryEncoder(JOINT_NAMES)

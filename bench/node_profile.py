@@ -1,11 +1,12 @@
 """Where the time goes inside observer_node and estimator_node, per pose.
 
-The nodes of bench/latency.py (its model, stream, parameters and every-pose replanning), but
-their callbacks are called directly in this one thread at the stream's pace (poses stamped with
-the node clock when fed): the observer's observation and event publishers hand their messages
-straight to the estimator's callbacks, so the time of a pose is the nodes' own work, without
-the transport's hops and without other threads. Every stage listed in STAGES is timed with
-time.perf_counter around each call (about 1 us of overhead each).
+The nodes of bench/latency.py (its model, and the stream, parameters and every-pose replanning
+it takes from bench/_common.py), but their callbacks are called directly in this one thread at
+the stream's pace (poses stamped with the node clock when fed): the observer's observation and
+event publishers hand their messages straight to the estimator's callbacks, so the time of a
+pose is the nodes' own work, without the transport's hops and without other threads. Every
+stage listed in STAGES is timed with time.perf_counter around each call (about 1 us of overhead
+each); the stages are the nodes' inner methods, private ones included, wrapped by name.
 
 Keys: poses, poses_with_plan (a trajectory sent in the pose's callback);
 per_pose_ms_{median,p99} (observer callback, estimator's work included) and to_trajectory_ms_
@@ -21,25 +22,24 @@ import collections
 import functools
 import json
 import os
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np  # noqa: E402
 import rclpy  # noqa: E402
 from rclpy.context import Context  # noqa: E402
 
-import latency as L  # noqa: E402
+from _common import (ESTIMATOR_PARAMS, EVERY_POSE, OBSERVER_PARAMS, Stream,  # noqa: E402
+                     as_parameters, padded_wrist)
 from mixture_ip_ros.app.training import train_to_file  # noqa: E402
 from mixture_ip_ros.core.stamps import ns_to_parts  # noqa: E402
 from mixture_ip_ros.estimation import planner as planner_module  # noqa: E402
 from mixture_ip_ros.nodes.estimator_node import EstimatorNode  # noqa: E402
 from mixture_ip_ros.nodes.observer_node import ObserverNode  # noqa: E402
-from mixture_ip_ros.scenarios.generated import box_assembly  # noqa: E402
+from mixture_ip_ros.scenarios.box_assembly import box_assembly  # noqa: E402
 
 # (owner, method) per node: 'observer'/'estimator' is the node, the others attributes of it.
 STAGES = {
@@ -117,19 +117,19 @@ def main():
     chosen = [next(g for g in gen if g.label == label and g is not warm_demo)
               for label in ('plate', 'screw', 'screwdriver')]
     chosen += [g for g in gen if g is not warm_demo and g not in chosen]
-    stream = L.Stream()
-    stream.add(*L.padded_wrist(warm_demo, seed=100))
+    stream = Stream()
+    stream.add(*padded_wrist(warm_demo, seed=100))
     for i, g in enumerate(chosen[:args.demos]):
-        stream.add(*L.padded_wrist(g, seed=i))
+        stream.add(*padded_wrist(g, seed=i))
     ctx = Context()
     rclpy.init(context=ctx, domain_id=domain)
     with tempfile.TemporaryDirectory(prefix='node_profile_') as tmp:
         model_path = Path(tmp) / 'box_model.npz'
         train_to_file([g.to_demonstration(0.01) for g in gen], model_path, n_components=3)
         observer = ObserverNode(context=ctx,
-                                parameter_overrides=L.as_parameters(L.OBSERVER_PARAMS))
-        estimator = EstimatorNode(context=ctx, parameter_overrides=L.as_parameters(
-            {**L.ESTIMATOR_PARAMS, 'model_path': str(model_path), **L.EVERY_POSE}))
+                                parameter_overrides=as_parameters(OBSERVER_PARAMS))
+        estimator = EstimatorNode(context=ctx, parameter_overrides=as_parameters(
+            {**ESTIMATOR_PARAMS, 'model_path': str(model_path), **EVERY_POSE}))
         try:
             for node in (observer, estimator):
                 if not node.start():
@@ -145,9 +145,9 @@ def main():
             for module, names in MODULE_STAGES.items():
                 for name in names:
                     spans.wrap(module, name, f'{module.__name__.split(".")[-1]}.{name}')
-            observer._obs_pub = Handoff(estimator.on_observation)
-            observer._event_pub = Handoff(estimator.on_event)
-            sent = estimator._traj_pub = Sent(estimator._traj_pub)
+            observer.observation_pub = Handoff(estimator.on_observation)
+            observer.event_pub = Handoff(estimator.on_event)
+            sent = estimator.trajectory_pub = Sent(estimator.trajectory_pub)
             clock = observer.get_clock()
             rows = []
             t0 = time.perf_counter() + 0.02

@@ -20,7 +20,8 @@ import time
 import numpy as np
 from scipy import linalg, optimize
 
-from mixture_ip_ros.app.evaluation import _majority_names, _prefix_length
+from mixture_ip_ros.app.evaluation.baselines import majority_names
+from mixture_ip_ros.app.evaluation.common import prefix_length
 from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.promp import observation_stats, weight_posterior
@@ -43,7 +44,9 @@ def loglik(model, k, z, y):
     st = observation_stats(model.basis_, z, y)
     do = model.n_observed_ * model.n_basis
     chol = linalg.cho_factor(model.covariances_[k][:do, :do], lower=True)
-    return weight_posterior(st, model.means_[k][:do], chol, model._observed_noise(k))[2]
+    noise = model.observed_noise_var_    # (P,) shared, or (K, P) per component
+    return weight_posterior(st, model.means_[k][:do], chol,
+                            noise if noise.ndim == 1 else noise[k])[2]
 
 
 def best_warp(model, k, u, y, prior_sd, b0=None):
@@ -66,7 +69,7 @@ def accuracy(model, names, tests, fractions, prior_sd, warped):
     for f in fractions:
         ok = []
         for d in tests:
-            n = max(_prefix_length(d, f), 2)
+            n = max(prefix_length(d, f), 2)
             u, y = d.phase[:n], d.observed[:n]
             lp = np.log(model.weights_).copy()
             for k in range(model.n_components):
@@ -97,7 +100,7 @@ def main(argv=None):
 
     def named(m):
         return (list(m.classes_) if args.supervised
-                else _majority_names(np.argmax(m.resp_, 1), labels, K))
+                else majority_names(np.argmax(m.resp_, 1), labels, K))
     result = {'supervised': args.supervised, 'n_components': K,
               'linear_phase': accuracy(model, named(model), test, fractions, args.prior_sd, False)}
     bs = [None] * len(train)

@@ -30,15 +30,16 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 import numpy as np  # noqa: E402
 
-from mixture_ip_ros.app.evaluation import (GESTURE_FRACTIONS, _feed_until,  # noqa: E402
-                                           decimated_rows, majority_labels,
-                                           online_component_given_end, online_components,
-                                           phase_known_components)
+from mixture_ip_ros.app.evaluation.common import (decimated_rows, feed_until,  # noqa: E402
+                                                  majority_labels, online_component_given_end,
+                                                  online_components, phase_known_components)
+from mixture_ip_ros.app.evaluation.gestures import GESTURE_FRACTIONS  # noqa: E402
 from mixture_ip_ros.core.interaction import trajectory_distribution  # noqa: E402
 from mixture_ip_ros.core.mixture import MixtureIProMP  # noqa: E402
 from mixture_ip_ros.core.online import OnlineEstimator  # noqa: E402
 from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE  # noqa: E402
-from mixture_ip_ros.scenarios import generated  # noqa: E402
+from mixture_ip_ros.scenarios.folders import generate  # noqa: E402
+from mixture_ip_ros.scenarios.letters import LETTER_OBSERVATION_NOISE, phase_letters  # noqa: E402
 from mixture_ip_ros.scenarios.gestures import gesture_demonstrations  # noqa: E402
 
 DEFAULT = {'n_alpha': 50, 'alpha_range_std': 3.0, 'min_interval': 0.05}
@@ -94,9 +95,9 @@ def gestures():
 
 
 def letters():
-    data = generated.phase_letters(0)
+    data = phase_letters(0)
     model = MixtureIProMP(1, n_basis=15,
-                          observation_noise=generated.LETTER_OBSERVATION_NOISE).fit(data.train)
+                          observation_noise=LETTER_OBSERVATION_NOISE).fit(data.train)
     fr = (0.2, 0.4, 0.6, 0.8, 1.0)
     true_alpha = np.asarray(data.test_alpha)
     out = {'fractions': list(fr), 'unit': 'RMS in letter units; alpha error relative'}
@@ -130,7 +131,7 @@ def letters():
 
 def box_assembly():
     from mixture_ip_ros.robot.kinematics import RobotKinematics
-    demos = [g.to_demonstration() for g in generated.generate('box_assembly', 0)]
+    demos = [g.to_demonstration() for g in generate('box_assembly', 0)]
     kin = RobotKinematics()
     fr = (0.3, 0.5, 0.7, 1.0)
     variants = {'grid_map': (DEFAULT, False), 'refined': (DEFAULT, True),
@@ -149,11 +150,11 @@ def box_assembly():
             est = OnlineEstimator(model, **settings)
             h, e, j = [], [], 0
             for f in fr:
-                j = _feed_until(est, test, rows, j, f * test.duration)
+                j = feed_until(est, test, rows, j, f * test.duration)
                 k, a = est.map_hypothesis()
                 if refine:
                     a = est.refined_alpha(k)
-                mean = est._controlled_mean(k, est.posterior_at(k, a)[0])
+                mean = est.controlled_mean(k, est.posterior_at(k, a)[0])
                 q = trajectory_distribution(mean, None, model.basis_, [1.0], a)['position'][0]
                 h.append(names[k] == test.label)
                 e.append(100 * np.linalg.norm(kin.fk(q)[0] - q_true))

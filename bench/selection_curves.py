@@ -28,9 +28,10 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 import numpy as np  # noqa: E402
 
-from mixture_ip_ros.core.mixture import (calibrated_heldout_curves,  # noqa: E402
-                                         heldout_loglik_by_components, selection_curve)
-from mixture_ip_ros.scenarios import generated  # noqa: E402
+from mixture_ip_ros.core.selection import (calibrated_heldout_curves,  # noqa: E402
+                                           selection_curve)
+from mixture_ip_ros.scenarios.folders import generate  # noqa: E402
+from mixture_ip_ros.scenarios.letters import phase_letters  # noqa: E402
 from mixture_ip_ros.scenarios.gestures import gesture_demonstrations  # noqa: E402
 from mixture_ip_ros.scenarios.synthetic import mixture_demos  # noqa: E402
 
@@ -40,11 +41,11 @@ CUTS = ((0.3,), (0.5,), (0.7,), tuple(np.round(np.arange(0.1, 0.95, 0.1), 1)))
 def data_sets():
     """(name, demonstrations, candidates, model parameters, the number of patterns or None)."""
     return [
-        ('box_assembly', [g.to_demonstration() for g in generated.generate('box_assembly', 0)],
+        ('box_assembly', [g.to_demonstration() for g in generate('box_assembly', 0)],
          range(1, 7), {}, 3),
-        ('pole', [g.to_demonstration() for g in generated.generate('pole', 0)], range(1, 13),
+        ('pole', [g.to_demonstration() for g in generate('pole', 0)], range(1, 13),
          {}, None),
-        ('letters', generated.phase_letters(0).train, range(1, 5), {}, 1),
+        ('letters', phase_letters(0).train, range(1, 5), {}, 1),
         ('sampled_3_patterns_2_controlled', mixture_demos(seed=5, n_obs=2, n_ctrl=3)[0],
          range(1, 7), {'n_basis': 8}, 3),
         ('sampled_3_patterns_single_agent', mixture_demos(seed=5, n_obs=2, n_ctrl=0)[0],
@@ -102,7 +103,8 @@ def main():
         candidates = list(candidates)
         params = {'n_basis': 15, 'method': 'regression', **params}
         cal = calibrated_heldout_curves(demos, candidates, **params)
-        fixed = heldout_loglik_by_components(demos, candidates, prior_scale=0.02, **params)
+        fixed = calibrated_heldout_curves(demos, candidates, (), [0.02], controlled=False,
+                                          **params)['loglik']['scores']
         by_cut = {}
         for cut in CUTS:
             c = calibrated_heldout_curves(demos, candidates, cut, **params)['completion']

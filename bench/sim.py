@@ -26,6 +26,7 @@ import statistics
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
@@ -34,7 +35,6 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 import pinocchio  # noqa: E402
 
-from mixture_ip_ros.robot.controller import _acceleration, _clip_into  # noqa: E402
 from mixture_ip_ros.robot.description import JOINT_NAMES  # noqa: E402
 from mixture_ip_ros.robot.sim import RobotSimulation  # noqa: E402
 from mixture_ip_ros.robot.trajectory import points_from_arrays  # noqa: E402
@@ -73,32 +73,31 @@ def bench_library(runs: int, seconds: float):
         sim.step(n)
         factors.append(seconds / (time.perf_counter() - start))
 
-    # The same loop as RobotSimulation.step and ComputedTorqueController.follow, with a
-    # stopwatch around each part.
+    # The same loop as RobotSimulation.step, with a stopwatch around each part: the follower's
+    # references, ComputedTorqueController.follow, and inside it each plant step (mj_step); the
+    # controller's share is follow's time less the plant's.
     sim.set_state(Q_A)
     _set(sim, _min_jerk_points(Q_A, Q_B, seconds))
     model, data, ctl = sim.model, sim.data, sim.controller
     clock = time.perf_counter
-    t_traj = t_ctrl = t_mj = 0.0
+    t_traj = t_follow = 0.0
+    t_plant = [0.0]
     q, qd, ctrl = data.qpos, data.qvel, data.ctrl
-    a = np.empty(7)
+
+    def advance():
+        t = clock()
+        mujoco.mj_step(model, data)
+        t_plant[0] += clock() - t
     left = n
     while left > 0:
         t0 = clock()
         refs = sim.follower.references(data.time, sim.dt, left, q, qd)
-        t_traj += clock() - t0
-        errors = np.empty((len(refs), 7))
-        for k in range(len(refs)):
-            t1 = clock()
-            _acceleration(refs, k, q, qd, ctl.kp, ctl.kd, a, errors)
-            tau = pinocchio.rnea(ctl._model, ctl._data, q, qd, a)
-            _clip_into(tau, ctl._neg_limit, ctl.effort_limit, ctrl)
-            t2 = clock()
-            mujoco.mj_step(model, data)
-            t3 = clock()
-            t_ctrl += t2 - t1
-            t_mj += t3 - t2
+        t1 = clock()
+        ctl.follow(q, qd, refs, ctrl, advance, np.empty((len(refs), 7)))
+        t_follow += clock() - t1
+        t_traj += t1 - t0
         left -= len(refs)
+    t_mj, t_ctrl = t_plant[0], t_follow - t_plant[0]
     # Pinocchio's RNEA call alone (part of step_us_pinocchio).
     pin_model = sim.controller_kinematics.model
     pin_data = pin_model.createData()
@@ -190,7 +189,7 @@ def bench_executable(seconds: float):
 
     domain = 190 + os.getpid() % 40
     proc = subprocess.Popen(
-        [sys.executable, '-m', 'mixture_ip_ros.nodes.sim_node', '--ros-args', '--params-file',
+        [str(Path(sys.executable).parent / 'sim_node'), '--ros-args', '--params-file',
          str(config_path('sim.yaml')), '-p', 'real_time_factor:=0.0'],
         env=dict(os.environ, ROS_DOMAIN_ID=str(domain)),
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

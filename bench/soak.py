@@ -14,8 +14,10 @@ after an onset, by the window its stamp falls in), {returns,transitions}_with_pl
 which any plan went out, e.g. the plans of the reach before a transition until the robot holds),
 trajectories, points_beyond_limits (points
 of every published trajectory outside the iiwa's position or velocity limits), holds (from
-diagnostics), soak_s.
-Run: .venv/bin/python bench/soak.py [--minutes 3] [--rate 500]
+diagnostics), soak_s, load (busy processes beside the nodes, --load N: each
+`python -c 'while True: pass'`, started once the nodes are up, killed at the end) and
+loadavg_1min at the end.
+Run: .venv/bin/python bench/soak.py [--minutes 3] [--rate 500] [--load 2]
 """
 
 import argparse
@@ -45,7 +47,8 @@ from mixture_ip_ros.core.share import config_path  # noqa: E402
 from mixture_ip_ros.core.stamps import ns_to_parts, stamp_to_ns  # noqa: E402
 from mixture_ip_ros.nodes import qos  # noqa: E402
 from mixture_ip_ros.nodes.spinning import spin_in_thread  # noqa: E402
-from mixture_ip_ros.scenarios.generated import MOCAP_NOISE, box_assembly  # noqa: E402
+from mixture_ip_ros.scenarios.box_assembly import box_assembly  # noqa: E402
+from mixture_ip_ros.scenarios.recording import MOCAP_NOISE  # noqa: E402
 
 BIN = Path(sys.executable).parent
 HOLD_S, REST_S = 0.6, 1.0
@@ -97,7 +100,7 @@ class Probe(Node):
     def __init__(self, **kwargs):
         super().__init__('soak_probe', **kwargs)
         self.pose_pub = self.create_publisher(PoseStamped, '/mocap/wrist', qos.sensor_data(100))
-        self.traj_sub = self.create_subscription(JointTrajectory, '/iiwa/joint_trajectory',
+        self.traj_sub = self.create_subscription(JointTrajectory, 'joint_trajectory',
                                                  self.on_traj, qos.reliable(1000))
         self.create_subscription(DiagnosticArray, '/diagnostics', self.on_diag, qos.reliable(10))
         self.create_subscription(Header, '/observer/event', self.on_event, qos.reliable(100))
@@ -133,6 +136,8 @@ def main():
     ap.add_argument('--minutes', type=float, default=3.0)
     ap.add_argument('--rate', type=float, default=500.0)
     ap.add_argument('--domain-id', type=int, default=None)
+    ap.add_argument('--load', type=int, default=0,
+                    help='busy processes competing for the CPUs during the soak')
     args = ap.parse_args()
     domain = args.domain_id if args.domain_id is not None else 10 + os.getpid() % 80
     rng = np.random.default_rng(7)
@@ -156,6 +161,7 @@ def main():
         rclpy.init(context=ctx, domain_id=domain)
         probe = Probe(context=ctx)
         ex, th = spin_in_thread(probe)
+        busy = []
         try:
             deadline = time.monotonic() + 60
             while not (probe.pose_pub.get_subscription_count() and
@@ -164,6 +170,8 @@ def main():
                     raise RuntimeError('the nodes did not come up')
                 time.sleep(0.05)
             rss0 = {exe: rss_mb(p.pid) for exe, (p, _) in procs.items()}
+            busy = [subprocess.Popen([sys.executable, '-c', 'while True: pass'])
+                    for _ in range(args.load)]
             windows = []                 # (kind, first stamp, last stamp)
             msg = PoseStamped()
             msg.header.frame_id = 'world'
@@ -194,7 +202,11 @@ def main():
                 windows.append((kind, first, ns))
             time.sleep(2.5)              # the last diagnostics and trajectories
             rss1 = {exe: rss_mb(p.pid) for exe, (p, _) in procs.items()}
+            loadavg = os.getloadavg()[0]
         finally:
+            for p in busy:
+                p.kill()
+                p.wait()
             ex.shutdown(timeout_sec=2.0)
             th.join(timeout=2.0)
             probe.destroy_node()
@@ -249,7 +261,8 @@ def main():
         'holds': int(est.get('holds_unexplained', -1)),
         **{f'rss_mb_start_{exe.split("_")[0]}': v for exe, v in rss0.items()},
         **{f'rss_mb_end_{exe.split("_")[0]}': v for exe, v in rss1.items()},
-        'rate_hz': args.rate, 'soak_s': round(time.monotonic() - t_start, 1)})
+        'rate_hz': args.rate, 'load': args.load, 'loadavg_1min': round(loadavg, 2),
+        'soak_s': round(time.monotonic() - t_start, 1)})
     print(json.dumps(result))
 
 

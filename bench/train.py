@@ -3,17 +3,17 @@
 The bags are generated into a temporary folder (`mixture-ip generate --scenario box_assembly`
 defaults; not timed). Each run is a fresh process doing what `mixture-ip train bags/ --out
 model.npz` does: load the bags (load_s), then app.training.train_to_file with K chosen over
-1..6 (train_s): the calibrated held-out curves (heldout_s: the log-likelihood, and the controlled
-agent's RMS that sets each K's floor for leave-one-out), the leave-one-out RMS (loo_s), both
-together selection_s, the final fit (fit_s), the novelty calibration (novelty_s) and the save
-(save_s). n_fits counts every mixture fit; peak_rss_mb is the run's
-peak resident memory. Top-level keys are medians over the runs (the machine may be shared).
+1..6 (train_s): K by the pattern space's leave-one-out curve (patterns_s), the chosen K's
+covariance floor calibrated on held-out folds (heldout_s), both together selection_s, the final
+fit (fit_s), the novelty calibration (novelty_s) and the save (save_s). n_fits counts every
+mixture fit; peak_rss_mb is the run's peak resident memory. Top-level keys are medians over the
+runs (the machine may be shared).
 
-``reference`` is the same path with the K curves computed by the straightforward loop, one
-MixtureIProMP(...).fit of the demonstrations of each fold (same folds, seeds and floors), in
-the same script: the ratio ``speedup_vs_reference`` is what reusing per-demonstration work
-across folds gains; ``same_selection`` whether both chose the same K and floor with curves
-equal to 1e-9.
+``reference`` is the same path with the floor's held-out curves computed by the straightforward
+loop, one MixtureIProMP(...).fit of the demonstrations of each fold (same folds, seeds and
+floors), in the same script: the ratio ``speedup_vs_reference`` is what reusing
+per-demonstration work across folds gains; ``same_selection`` whether both chose the same K and
+floor with curves equal to 1e-9.
 
 Prints one JSON object.
 
@@ -33,8 +33,8 @@ from pathlib import Path
 
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
-KEYS = ('train_s', 'load_s', 'selection_s', 'heldout_s', 'loo_s', 'novelty_s', 'fit_s', 'save_s',
-        'peak_rss_mb', 'n_fits')
+KEYS = ('train_s', 'load_s', 'selection_s', 'patterns_s', 'heldout_s', 'novelty_s', 'fit_s',
+        'save_s', 'peak_rss_mb', 'n_fits')
 
 
 class Phases:
@@ -67,7 +67,8 @@ def plain_heldout(demos, candidates, fractions=(), prior_scales=(), n_folds=5, p
     """calibrated_heldout_curves (the held-out log-likelihood and, with a controlled agent, the
     controlled agent's RMS) by the straightforward loop (one fit per fold and floor)."""
     import numpy as np
-    from mixture_ip_ros.core.mixture import MixtureIProMP, controlled_rms, cv_folds
+    from mixture_ip_ros.core.mixture import MixtureIProMP
+    from mixture_ip_ros.core.selection import controlled_rms, cv_folds
     fold = cv_folds(len(demos), n_folds, fold_seed)
     scales = [float(s) for s in prior_scales]
     params = {k: v for k, v in params.items() if k != 'prior_scale'}
@@ -104,15 +105,6 @@ def plain_heldout(demos, candidates, fractions=(), prior_scales=(), n_folds=5, p
     return out
 
 
-def plain_loo(demos, candidates, observe='final', progress=None, **params):
-    """loo_rms_by_components by the straightforward loop (one fit per left-out demonstration)."""
-    import numpy as np
-    from mixture_ip_ros.core.mixture import MixtureIProMP, controlled_rms
-    return np.array([[controlled_rms(MixtureIProMP(n_components=K, **params).fit(
-        demos[:i] + demos[i + 1:]), test, observe) for i, test in enumerate(demos)]
-        for K in candidates])
-
-
 def one_run(bags: Path, reference: bool) -> dict:
     """Load and train once in this process (the way `mixture-ip train` does)."""
     from mixture_ip_ros.app import training
@@ -122,14 +114,11 @@ def one_run(bags: Path, reference: bool) -> dict:
     phases = Phases()
     if reference:
         training.calibrated_heldout_curves = plain_heldout
-        training.loo_rms_by_components = plain_loo
+    phases.wrap(training, '_pattern_selection', 'patterns_s')
     phases.wrap(training, 'calibrated_heldout_curves', 'heldout_s')
-    phases.wrap(training, 'loo_rms_by_components', 'loo_s')
     phases.wrap(training, 'calibrate_novelty', 'novelty_s')
     phases.wrap(training, 'save_model', 'save_s')
     phases.wrap(mixture.MixtureIProMP, 'fit', 'fit')
-    counted = '_fit_prepared' if hasattr(mixture.MixtureIProMP, '_fit_prepared') else 'fit'
-    phases.wrap(mixture.MixtureIProMP, counted, 'n_fits', timed=False)
     robot = load_description(None)
     t0 = time.perf_counter()
     demos, skipped = load_dataset(bags, joint_names=robot.joint_names,
@@ -143,15 +132,14 @@ def one_run(bags: Path, reference: bool) -> dict:
     sel = info['selection']
     s = phases.seconds
     return {'train_s': t2 - t1, 'load_s': t1 - t0,
-            'selection_s': s.get('heldout_s', 0.0) + s.get('loo_s', 0.0),
-            'heldout_s': s.get('heldout_s', 0.0), 'loo_s': s.get('loo_s', 0.0),
+            'selection_s': s.get('patterns_s', 0.0) + s.get('heldout_s', 0.0),
+            'patterns_s': s.get('patterns_s', 0.0), 'heldout_s': s.get('heldout_s', 0.0),
             'novelty_s': s.get('novelty_s', 0.0), 'fit_s': s.get('fit', 0.0),
             'save_s': s.get('save_s', 0.0),
             'peak_rss_mb': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-            'n_fits': phases.calls.get('n_fits', 0), 'n_demonstrations': len(demos),
+            'n_fits': phases.calls.get('fit', 0), 'n_demonstrations': len(demos),
             'n_skipped': len(skipped), 'chosen': sel['chosen'], 'prior_scale': sel['prior_scale'],
-            'heldout_mean_by_prior_scale': sel['heldout_loglik']['mean_by_prior_scale'],
-            'loo_rms_mean': info['loo_rms_mean'], 'loo_prior_scale': sel['loo_rms']['prior_scale']}
+            'patterns_mean': sel['mean']}
 
 
 def run_in_process(bags: Path, reference: bool) -> dict:
@@ -170,10 +158,7 @@ def medians(runs) -> dict:
 def same_curves(a: dict, b: dict, rtol: float = 1e-9) -> bool:
     import numpy as np
     return (a['chosen'] == b['chosen'] and a['prior_scale'] == b['prior_scale']
-            and a['loo_prior_scale'] == b['loo_prior_scale']
-            and np.allclose(a['heldout_mean_by_prior_scale'], b['heldout_mean_by_prior_scale'],
-                            rtol=rtol, atol=0)
-            and np.allclose(a['loo_rms_mean'], b['loo_rms_mean'], rtol=rtol, atol=0))
+            and np.allclose(a['patterns_mean'], b['patterns_mean'], rtol=rtol, atol=0))
 
 
 def main():
@@ -187,7 +172,7 @@ def main():
     if args.one is not None:
         print(json.dumps(one_run(args.one, args.reference)))
         return
-    from mixture_ip_ros.scenarios.generated import write_scenario_bags
+    from mixture_ip_ros.scenarios.folders import write_scenario_bags
     with tempfile.TemporaryDirectory() as tmp:
         bags = Path(tmp) / 'bags'
         write_scenario_bags('box_assembly', bags, seed=0)

@@ -2,7 +2,11 @@
 
 import os
 
-os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+from mixture_ip_ros.nodes.launch import set_process_defaults
+
+# The executables' environment (one BLAS thread, numba's cache in the user's cache folder), set
+# before any test module imports numpy or numba; the executables the tests start inherit it.
+set_process_defaults()
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 os.environ.setdefault('MUJOCO_GL', 'osmesa')
 
@@ -46,3 +50,12 @@ def harness(ros_context):
         yield h
     finally:
         h.close()
+
+
+def heldout_loglik(demos, candidates, prior_scales=None, **params):
+    """The held-out log-likelihood curve of core.selection.calibrated_heldout_curves alone (no
+    completion, no controlled agent's RMS), each K at its calibrated floor."""
+    from mixture_ip_ros.core.selection import PRIOR_SCALES, calibrated_heldout_curves
+    scales = PRIOR_SCALES if prior_scales is None else prior_scales
+    return calibrated_heldout_curves(demos, candidates, (), scales, controlled=False,
+                                     **params)['loglik']

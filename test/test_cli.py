@@ -20,6 +20,9 @@ from mixture_ip_ros.app.cli import main
     (['generate', '--scenario', 'pole', '--out', '{tmp}/bags', '--occlusion', 'nan'],
      "--occlusion: 'nan' is not a finite number"),
     (['demo', '--held-out', '0', '--out', '{tmp}/demo'], '--held-out: 0 is not >= 1'),
+    (['demo', '--scenario', 'dance', '--out', '{tmp}/demo'], "--scenario: invalid choice: 'dance'"),
+    (['demo', '--scenario', 'interactions', '--components', '0', '--out', '{tmp}/demo'],
+     '--components: 0 is not >= 1'),
     (['lifecycle', 'estimator_node', 'activate', '--timeout', '-1'], '--timeout: -1.0 is not'),
 ])
 def test_bad_options_are_one_line_exit_2_and_create_nothing(tmp_path, capsys, argv, message):

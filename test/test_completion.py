@@ -7,11 +7,12 @@ import pytest
 from scipy.special import logsumexp
 from scipy.stats import multivariate_normal, norm
 
+from conftest import heldout_loglik
 from mixture_ip_ros.core.basis import GaussianBasis
 from mixture_ip_ros.core.demonstration import Demonstration
-from mixture_ip_ros.core.mixture import (COMPLETION_FRACTIONS, MixtureIProMP,
-                                         calibrated_heldout_curves, calibrated_heldout_loglik,
-                                         controlled_rms, cv_folds, selection_curve)
+from mixture_ip_ros.core.mixture import COMPLETION_FRACTIONS, MixtureIProMP
+from mixture_ip_ros.core.selection import (calibrated_heldout_curves, controlled_rms, cv_folds,
+                                           score_completion, selection_curve)
 from mixture_ip_ros.core.promp import (log_evidence, observation_stats, stack_stats,
                                        weight_posterior)
 from mixture_ip_ros.scenarios.synthetic import mixture_demos, random_spd
@@ -59,7 +60,7 @@ def test_completion_scores_equal_dense_conditioning(Q):
             obs[-3] = np.nan                            # and one in the rest
         held.append(Demonstration(t, obs, d.controlled[idx]))
     fractions = (0.2, 0.5, 0.8)
-    density, rms = model.score_completion(held, fractions)
+    density, rms = score_completion(model, held, fractions)
     assert density.shape == rms.shape == (4, 3)
     for i, d in enumerate(held):
         for c, f in enumerate(fractions):
@@ -67,10 +68,10 @@ def test_completion_scores_equal_dense_conditioning(Q):
             assert density[i, c] == pytest.approx(want_density, rel=1e-8, abs=1e-7)
             assert rms[i, c] == pytest.approx(want_rms, rel=1e-7)
     # The default cuts are the evaluation's reporting fractions.
-    assert np.array_equal(model.score_completion(held)[0],
-                          model.score_completion(held, COMPLETION_FRACTIONS)[0])
+    assert np.array_equal(score_completion(model, held)[0],
+                          score_completion(model, held, COMPLETION_FRACTIONS)[0])
     with pytest.raises(ValueError, match=r'fractions must be numbers in \(0, 1\)'):
-        model.score_completion(held, (0.5, 1.0))
+        score_completion(model, held, (0.5, 1.0))
 
 
 def test_batched_posterior_means_equal_weight_posterior():
@@ -111,7 +112,7 @@ def test_completion_curves_equal_the_straightforward_loop(n_ctrl):
                 model = MixtureIProMP(K, n_basis=8, prior_scale=scale).fit(
                     [d for d, g in zip(demos, fold) if g != f])
                 test = np.flatnonzero(fold == f)
-                dd, rr = model.score_completion([demos[i] for i in test], (0.3, 0.6))
+                dd, rr = score_completion(model, [demos[i] for i in test], (0.3, 0.6))
                 density[b, a, test], rms[b, a, test] = dd.mean(axis=1), rr.mean(axis=1)
                 ll[b, a, test] = model.score_demonstrations([demos[i] for i in test])
                 if n_ctrl:
@@ -135,15 +136,15 @@ def test_completion_curves_equal_the_straightforward_loop(n_ctrl):
             assert cal['controlled_rms']['prior_scale'][a] == scales[b]
             assert np.allclose(cal['controlled_rms']['scores'][a], ctrl[b, a], rtol=1e-10)
     assert np.allclose(cal['completion']['mean_by_scale'], density.mean(axis=2), rtol=1e-10)
-    # The held-out log-likelihood of the same fits is the one calibrated_heldout_loglik gives.
-    ll = calibrated_heldout_loglik(demos, candidates, scales, n_basis=8)
+    # The held-out log-likelihood of the same fits is the one the likelihood curve alone gives.
+    ll = heldout_loglik(demos, candidates, scales, n_basis=8)
     assert np.allclose(cal['loglik']['scores'], ll['scores'], rtol=1e-12)
     assert cal['loglik']['prior_scale'] == ll['prior_scale']
 
 
 @pytest.mark.parametrize('noise', ['tied', 'per_component'])
 def test_batched_final_rms_equals_controlled_rms(noise):
-    from mixture_ip_ros.core.mixture import _final_rms, _final_views
+    from mixture_ip_ros.core.selection import _final_rms, _final_views
     demos = mixture_demos(seed=3, n_obs=3, n_ctrl=2, counts=(8, 9, 7))[0]
     model = MixtureIProMP(3, n_basis=8, noise=noise, observation_noise=0.01).fit(demos[4:])
     view = _final_views(model.basis_, demos)

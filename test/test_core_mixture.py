@@ -7,9 +7,11 @@ from sklearn.mixture import GaussianMixture
 
 from mixture_ip_ros.core.basis import GaussianBasis
 from mixture_ip_ros.core.demonstration import Demonstration
+from mixture_ip_ros.core.kmeans import kmeans
 from mixture_ip_ros.core.interaction import condition_on_observed, trajectory_distribution
-from mixture_ip_ros.core.mixture import (MixtureIProMP, gmm_maximization, gmm_responsibilities,
-                                         kmeans, loo_rms_by_components, select_n_components)
+from mixture_ip_ros.core.mixture import MixtureIProMP
+from mixture_ip_ros.core.selection import loo_rms_by_components, select_n_components
+from mixture_ip_ros.core.gmm import gmm_maximization, gmm_responsibilities
 from mixture_ip_ros.core.promp import ProMP
 
 from mixture_ip_ros.scenarios.synthetic import mixture_demos, random_spd
@@ -219,7 +221,7 @@ def test_a_component_left_empty_keeps_a_finite_phase_prior():
     """K = 10 on 47 box-assembly demonstrations with a broad covariance floor: EM empties a
     component (0 / 0 gave NaN priors and an all-NaN online posterior)."""
     from mixture_ip_ros.core.online import OnlineEstimator
-    from mixture_ip_ros.scenarios.generated import box_assembly
+    from mixture_ip_ros.scenarios.box_assembly import box_assembly
     demos = [g.to_demonstration(0.01) for g in box_assembly(0, occlusion=0.5)]
     m = MixtureIProMP(10, prior_scale=0.3).fit(demos[:1] + demos[2:])
     empty = m.resp_.sum(axis=0) < 1e-12

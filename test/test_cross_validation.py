@@ -6,11 +6,13 @@ demonstrations, with the same folds and seeds."""
 import numpy as np
 import pytest
 
+from conftest import heldout_loglik
 from mixture_ip_ros.app.training import train
 from mixture_ip_ros.core.demonstration import Demonstration
-from mixture_ip_ros.core.mixture import (MixtureIProMP, calibrated_heldout_loglik, controlled_rms,
-                                         cv_folds, heldout_loglik_by_components, kmeans,
-                                         loo_rms_by_components)
+from mixture_ip_ros.core.kmeans import kmeans
+from mixture_ip_ros.core.mixture import MixtureIProMP
+from mixture_ip_ros.core.selection import (controlled_rms, cv_folds,
+                                           loo_rms_by_components)
 from mixture_ip_ros.scenarios.synthetic import mixture_demos
 
 
@@ -88,12 +90,12 @@ def test_heldout_curves_equal_the_straightforward_loop(n_ctrl):
     demos = occluded(mixture_demos(seed=5, n_obs=2, n_ctrl=n_ctrl, counts=(8, 9, 7))[0])
     candidates, scales = [1, 2, 3, 4], [1.0, 0.1, 0.01]
     plain = plain_heldout(demos, candidates, scales, n_basis=8)
-    cal = calibrated_heldout_loglik(demos, candidates, scales, n_basis=8)
+    cal = heldout_loglik(demos, candidates, scales, n_basis=8)
     assert np.allclose(cal['mean_by_scale'], plain.mean(axis=2), rtol=1e-12, atol=0)
     best = np.argmax(plain.mean(axis=2), axis=0)
     assert cal['prior_scale'] == [scales[b] for b in best]
     assert np.allclose(cal['scores'], plain[best, range(len(candidates))], rtol=1e-12, atol=0)
-    fixed = heldout_loglik_by_components(demos, candidates, n_basis=8, prior_scale=0.1)
+    fixed = heldout_loglik(demos, candidates, [0.1], n_basis=8)['scores']
     assert np.allclose(fixed, plain[1], rtol=1e-12, atol=0)
 
 
@@ -122,13 +124,14 @@ def test_em_stops_when_the_responsibilities_repeat_with_the_parameters_of_the_fu
 
 def test_training_keeps_three_patterns_on_box_assembly():
     from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE
-    from mixture_ip_ros.scenarios.generated import box_assembly
+    from mixture_ip_ros.scenarios.box_assembly import box_assembly
     demos = [g.to_demonstration(0.01) for g in box_assembly(0, occlusion=0.5)]
-    model, info = train(demos, candidates=range(1, 7), observation_noise=WRIST_OBSERVATION_NOISE)
-    sel = info['selection']
-    assert sel['chosen'] == 3 and sel['clear_optimum']
-    assert sel['heldout_loglik']['chosen'] == 3 and sel['loo_rms']['chosen'] == 3
-    assert model.n_components == 3 and model.prior_scale == sel['prior_scale']
+    for criterion in ('patterns', 'loo'):
+        model, info = train(demos, candidates=range(1, 7), criterion=criterion,
+                            observation_noise=WRIST_OBSERVATION_NOISE)
+        sel = info['selection']
+        assert sel['criterion'] == criterion and sel['chosen'] == 3 and sel['clear_optimum']
+        assert model.n_components == 3 and model.prior_scale == sel['prior_scale']
 
 
 def test_heldout_loglik_of_em_data_with_a_robot_never_observed():
@@ -137,5 +140,5 @@ def test_heldout_loglik_of_em_data_with_a_robot_never_observed():
     demos = mixture_demos(seed=5, n_obs=2, n_ctrl=2, counts=(6, 6, 6))[0]
     blind = demos[3]
     demos[3] = Demonstration(blind.t, blind.observed, np.full_like(blind.controlled, np.nan))
-    cal = calibrated_heldout_loglik(demos, [1, 2], [1.0], n_basis=6, method='em', max_iter=5)
+    cal = heldout_loglik(demos, [1, 2], [1.0], n_basis=6, method='em', max_iter=5)
     assert np.all(np.isfinite(cal['scores']))

@@ -117,6 +117,25 @@ def test_single_dropped_packet_is_bridged_and_other_rates(tmp_path):
     assert abs(demo.duration - MOVE) < 0.2
 
 
+def test_samples_the_observer_drops_are_missing_when_a_bag_is_loaded(tmp_path):
+    """A tracker that jumps 0.6 m away for 2 samples mid-reach: the observer refuses both (no
+    hand moves that fast), so training must not see them either."""
+    bag, t = _bag(tmp_path / 'glitch')
+    clean = load_demonstration(bag, transform=TF)
+    from mixture_ip_ros.io.bags import read_bag
+    rec = read_bag(bag)
+    xyz = rec.wrist_xyz.copy()
+    jump = (t > 0.995) & (t < 1.015)
+    assert jump.sum() == 2
+    xyz[jump] += (0.0, 0.0, -0.6)
+    bag2 = write_demonstration_bag(tmp_path / 'glitch2', t, xyz, rec.joint_t, rec.joint_q)
+    demo = load_demonstration(bag2, transform=TF)
+    assert demo.t.size == clean.t.size
+    missing = np.isnan(demo.observed).any(axis=1)
+    assert 1 <= missing.sum() <= 3                     # the two samples, seen on a 10 ms grid
+    np.testing.assert_allclose(demo.observed[~missing], clean.observed[~missing])
+
+
 def test_bad_recordings_name_the_bag(tmp_path):
     bag, _ = _bag(tmp_path / 'short_joints', joint_t=np.arange(0, 1.0, 0.01))
     with pytest.raises(BagError, match='joint states cover') as err:

@@ -38,7 +38,7 @@ ONSET_NS = 1_000_000_000_000          # observation stamps: onset + t
 FRAME = 'iiwa_link_0'
 # Timers that never fire during a test: replans and diagnostics are driven by hand.
 MANUAL = {'replan_rate_hz': 0.01, 'diagnostics_period': 3600.0, 'replan_on_observation': False}
-OUTPUTS = {'trajectory': (JointTrajectory, '/iiwa/joint_trajectory'),
+OUTPUTS = {'trajectory': (JointTrajectory, '/joint_trajectory'),
            'path': (Path, '/estimator/predicted_wrist'),
            'posterior': (Float64MultiArray, '/estimator/posterior'),
            'markers': (MarkerArray, '/estimator/markers'),
@@ -80,8 +80,8 @@ class Estimator:
 
     def discover(self):
         n = self.node
-        self.h.matched(self.obs_pub, self.event_pub, n._traj_pub, n._path_pub, n._post_pub,
-                       n._diag_pub, n._marker_pub)
+        self.h.matched(self.obs_pub, self.event_pub, n.trajectory_pub, n.path_pub, n.posterior_pub,
+                       n.diagnostics_pub, n.marker_pub)
 
     def event(self, kind, ns):
         self.event_pub.publish(Header(frame_id=kind, stamp=time_msg(ns)))
@@ -455,7 +455,7 @@ def test_lifecycle_services_and_parameter_descriptions(estimator, trained):
     # inactive: no longer subscribed, and the trajectory publisher is off
     h.spin_until(lambda: h.probe.count_subscribers('/observer/wrist') == 0,
                  what='the subscription gone')
-    assert not e.node._traj_pub.is_activated
+    assert not e.node.trajectory_pub.is_activated
     assert h.result(lifecycle.change_async('activate')).success
     assert h.result(lifecycle.change_async('deactivate')).success
     assert h.result(lifecycle.change_async('cleanup')).success

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from matplotlib import image as mpimg
 
-from mixture_ip_ros.scenarios import generated as scenarios
+from mixture_ip_ros.scenarios.box_assembly import box_assembly
+from mixture_ip_ros.scenarios.folders import write_scenario_bags
 from mixture_ip_ros.app.evaluation import EvalConfig, evaluate, prepare
 
 # Thesis 3.4.2: hand position error, mean (cm), leave-one-out.
@@ -35,7 +36,7 @@ def box_from_bags(tmp_path_factory):
     out, each model trained on the 47 others."""
     root = tmp_path_factory.mktemp('box')
     bag_dir = root / 'bags'
-    scenarios.write_scenario_bags('box_assembly', bag_dir, seed=0)
+    write_scenario_bags('box_assembly', bag_dir, seed=0)
     config = EvalConfig(candidates=(1, 2, 3, 4), model={'n_basis': 10}, fold_stride=3,
                         subsample=3, fractions=(0.3, 0.5, 0.7, 1.0))
     out = root / 'out'
@@ -132,7 +133,7 @@ def test_box_assembly_of_another_arm_uses_its_joints_and_kinematics(tmp_path):
     """UR5 bags (6 joints): read with its joint names, the hand error from its forward
     kinematics, the same aims as the iiwa's; the iiwa's bags are refused for the UR5 whole."""
     bag_dir = tmp_path / 'ur5_bags'
-    scenarios.write_scenario_bags('box_assembly', bag_dir, seed=0, robot='ur5')
+    write_scenario_bags('box_assembly', bag_dir, seed=0, robot='ur5')
     config = EvalConfig(candidates=(1, 3), model={'n_basis': 10}, fold_stride=3, subsample=3,
                         fractions=(0.5, 1.0))
     m = evaluate('box_assembly', tmp_path / 'out', bag_dir=bag_dir, config=config, robot='ur5')
@@ -149,7 +150,7 @@ def test_box_assembly_of_another_arm_uses_its_joints_and_kinematics(tmp_path):
 
 
 def test_prepare_keeps_the_final_sample():
-    demo = [g.to_demonstration() for g in scenarios.box_assembly(0, counts={'plate': 1})][0]
+    demo = [g.to_demonstration() for g in box_assembly(0, counts={'plate': 1})][0]
     sub = prepare([demo], 4)[0]
     assert sub.t[-1] == demo.t[-1]
     assert np.array_equal(sub.observed[-1], demo.observed[-1])
@@ -159,10 +160,10 @@ def test_prepare_keeps_the_final_sample():
 def test_bad_arguments_are_rejected(tmp_path):
     with pytest.raises(ValueError, match='unknown scenario'):
         evaluate('toolbox', tmp_path)
-    with pytest.raises(ValueError, match='letters'):
+    with pytest.raises(ValueError, match='reads its own data'):
         evaluate('phase', tmp_path, bag_dir=tmp_path)
     with pytest.raises(ValueError, match='labelled'):
-        demo = [g.to_demonstration() for g in scenarios.box_assembly(0, counts={'plate': 3})]
+        demo = [g.to_demonstration() for g in box_assembly(0, counts={'plate': 3})]
         for d in demo:
             d.label = None
         evaluate('box_assembly', tmp_path, demos=demo,

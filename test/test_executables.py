@@ -31,6 +31,41 @@ def test_a_bad_parameter_is_one_line_and_exit_1_for_every_executable(executable)
     assert 'Traceback' not in out, out
 
 
+PROCESS_DEFAULTS = ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS',
+                    'NUMBA_CACHE_DIR', 'MIXTURE_IP_CACHE', 'MUJOCO_GL')
+
+
+def test_importing_the_package_changes_no_environment():
+    """The package, the executables' own modules and the renderer imported in a process without
+    the executables' defaults: os.environ is as it was (the environment is the executables' to
+    set, when they run)."""
+    code = ('import os\n'
+            'before = dict(os.environ)\n'
+            'import mixture_ip_ros, mixture_ip_ros.nodes.launch, mixture_ip_ros.app.cli\n'
+            'import mixture_ip_ros.viz.animation, mixture_ip_ros.viz.offscreen\n'
+            'changed = sorted(k for k in set(before) | set(os.environ)\n'
+            '                 if before.get(k) != os.environ.get(k))\n'
+            'assert not changed, changed\n')
+    env = {k: v for k, v in os.environ.items() if k not in PROCESS_DEFAULTS}
+    proc = subprocess.run([sys.executable, '-c', code], env=env, capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr
+
+
+@pytest.mark.parametrize('command', [['mixture-ip', 'params', 'estimator_node'],
+                                     ['estimator_node']])
+def test_the_executables_cache_compiled_kernels_in_the_users_cache(command, tmp_path):
+    """The estimator's module compiles its plan kernels when imported (the node executable
+    refuses to start without a model after that); numba caches them in the user's cache folder,
+    not beside the package's source."""
+    env = {k: v for k, v in _env().items() if k not in PROCESS_DEFAULTS}
+    env['XDG_CACHE_HOME'] = str(tmp_path)
+    subprocess.run([str(BIN / command[0]), *command[1:]], env=env, capture_output=True,
+                   timeout=120)
+    assert list((tmp_path / 'mixture_ip_ros' / 'numba').rglob('*.nbi')), \
+        'no numba cache index in the user cache'
+
+
 @pytest.fixture(scope='module')
 def model(tmp_path_factory):
     from mixture_ip_ros.app.training import train_to_file

@@ -1,18 +1,18 @@
 """Real human motion: PickupGestureWiimoteZ (fetched from the aeon wheel) through the gesture
-evaluation, on a CI-sized subset (4 of the 10 people), with its baselines; the .ts reader and the
-rest-deviation segmentation on their own."""
+evaluation, on a CI-sized subset (4 of the 10 people), with its baselines; the .ts reader on its
+own."""
 
 import json
 
 import numpy as np
 import pytest
 
-from mixture_ip_ros.app.evaluation import (decimated_rows, evaluate, online_component_given_end,
-                                           phase_known_components)
+from mixture_ip_ros.app.evaluation import evaluate
+from mixture_ip_ros.app.evaluation.common import (decimated_rows, online_component_given_end,
+                                                  phase_known_components)
 from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.scenarios.synthetic import mixture_demos
-from mixture_ip_ros.core.segmentation import segment_rest_deviation, sensor_resolution
 from mixture_ip_ros.io.ucr import read_ts
 
 from test_evaluation import assert_real_pngs
@@ -41,13 +41,11 @@ def test_gesture_evaluation_reports_every_method_on_the_same_split(quick_gesture
     assert np.allclose(np.array(list(m['supervised_accuracy_by_fraction'].values())) * 20 % 1, 0)
     # The DTW baseline is far above chance on real data (a sanity check of the data and split).
     assert m['baseline_dtw_accuracy'] > 2 * m['chance_accuracy']
-    # The choice of K comes with its curve and a verdict on it.
+    # The choice of K is training's, with its curve and a verdict on it.
     sel = m['k_selection']
-    assert len(sel['mean_nats']) == len(sel['candidates']) == len(sel['prior_scale']) == 6
-    assert sel['prior_scale_selected'] == sel['prior_scale'][sel['candidates'].index(
-        m['n_components_selected'])]
+    assert sel['criterion'] == 'patterns' and len(sel['mean']) == len(sel['candidates']) == 6
+    assert sel['chosen'] == m['n_components_selected'] and sel['prior_scale'] == m['prior_scale']
     assert isinstance(sel['clear_optimum'], bool) and sel['note']
-    assert m['n_components_selected'] in sel['candidates']
     assert len(m['component_labels']) == m['n_components_selected']
     ref = m['reference_k_classes']
     assert ref['n_components'] == 4 and set(ref['unsupervised_accuracy_by_fraction']) == set(
@@ -59,10 +57,8 @@ def test_gesture_evaluation_reports_every_method_on_the_same_split(quick_gesture
     for who in ('supervised', 'unsupervised'):
         assert m[f'{who}_accuracy_given_end'] == m[f'{who}_accuracy_phase_known_by_fraction']['1']
     assert 0 <= ref['unsupervised_accuracy_given_end'] <= 1
-    # The completion criterion's curve from the same fits, reported beside the choice.
-    comp = sel['completion']
-    assert comp['chosen'] in sel['candidates'] and len(comp['mean_nats']) == 6
-    assert isinstance(comp['clear_optimum'], bool) and 'not used' in comp['criterion']
+    # The per-class ProMP baseline's ridge is chosen by cross-validation on the training set.
+    assert m['baseline_promp_shrinkage'] in (1e-4, 1e-3, 1e-2, 1e-1, 1.0)
     # Labels never reach the unsupervised fit: every training gesture is in one component.
     assert np.sum(m['clusters_vs_labels']['counts']) == 20
     assert json.loads((out / 'metrics.json').read_text()) == m
@@ -78,21 +74,6 @@ def test_ts_reader_reads_unequal_lengths_and_labels(tmp_path):
     (tmp_path / 'y.ts').write_text('@classLabel true a\n@data\n1,x:a\n')
     with pytest.raises(ValueError, match=r'y\.ts, line 3: not a number'):
         read_ts(tmp_path / 'y.ts')
-
-
-def test_rest_deviation_segmentation_is_relative_to_rest_level_and_resolution():
-    rng = np.random.default_rng(0)
-    step = 0.04                                           # a quantised sensor at rest on 1 g
-    t = np.arange(300) / 100.0
-    y = np.full(300, 1.0)
-    y[100:200] += 0.6 * np.sin(np.pi * (t[100:200] - 1.0))   # the movement: 1.0 s .. 2.0 s
-    y[200:] = 0.7                                          # rest again, at another level
-    y = np.round((y + rng.normal(0, 0.01, 300)) / step) * step
-    assert sensor_resolution(y) == pytest.approx(step)
-    on, end = segment_rest_deviation(t, y)
-    assert 0.9 <= on <= 1.1 and 1.9 <= end <= 2.1
-    # Ten times the scale (another unit): the same times, nothing is a fixed threshold.
-    assert segment_rest_deviation(t, 10 * y) == (on, end)
 
 
 def test_phase_known_sees_the_samples_the_online_estimator_absorbs():

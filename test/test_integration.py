@@ -1,7 +1,13 @@
 """The closed loop with the real nodes: bags -> observer -> estimator -> MuJoCo iiwa (and UR5).
 
 In-process (one executor, private domain), cross-process (the executables, as a user starts
-them), and bad input into the running system.
+them), bad input into the running system, commands delayed on their way to the arm, and the
+loop on a machine loaded with busy processes.
+
+Nothing here depends on the wall clock: the loop runs on simulated time paced at real time, and
+a test waits on the simulated clock or a condition (with timeouts far above any run). On a slow
+or loaded machine messages arrive later in simulated time; what the assertions demand holds
+then too.
 """
 
 import math
@@ -14,7 +20,7 @@ import numpy as np
 import pytest
 
 from conftest import private_domain_id
-from mixture_ip_ros.scenarios.generated import read_labels, write_scenario_bags
+from mixture_ip_ros.scenarios.folders import read_labels, write_scenario_bags
 
 pytestmark = pytest.mark.filterwarnings('ignore::DeprecationWarning')
 # Where the hand must end (m from the demonstrated target): the model's own error plus 0.5-0.7 cm
@@ -43,12 +49,42 @@ def setup(tmp_path_factory):
     return {'data': data, 'labels': labels, 'held': held, 'model': model, 'targets': targets}
 
 
+class _Loops:
+    """One in-process loop at a time on the module's domain, started as a test asks for it
+    (without or with a command relay). An idle loop costs a third of a core (its simulation
+    runs in real time), which the other tests should not pay."""
+
+    def __init__(self, model):
+        self.model = model
+        self.current = None
+
+    def get(self, command_delay=None):
+        from mixture_ip_ros.app.closed_loop import ClosedLoop
+        if self.current is not None and (self.current.relay is None) != (command_delay is None):
+            self.close()
+        if self.current is None:
+            self.current = ClosedLoop(self.model, domain_id=private_domain_id(),
+                                      command_delay=command_delay)
+        elif command_delay is not None:
+            self.current.set_command_delay(command_delay)
+        return self.current
+
+    def close(self):
+        if self.current is not None:
+            self.current.close()
+            self.current = None
+
+
 @pytest.fixture(scope='module')
-def loop(setup):
-    from mixture_ip_ros.app.closed_loop import ClosedLoop
-    system = ClosedLoop(setup['model'], domain_id=private_domain_id())
-    yield system
-    system.close()
+def loops(setup):
+    pool = _Loops(setup['model'])
+    yield pool
+    pool.close()
+
+
+@pytest.fixture
+def loop(loops):
+    return loops.get()
 
 
 def _run(loop, setup, name):
@@ -57,21 +93,50 @@ def _run(loop, setup, name):
                                 target=setup['targets'][name])
 
 
-def test_three_held_out_interactions_in_process(loop, setup):
-    records = [_run(loop, setup, name) for name in setup['held']]
+def _hand_error(r):
+    return float(np.linalg.norm(r.flange[-1] - r.target))
+
+
+@pytest.fixture(scope='module')
+def reference(loops, setup):
+    """The three held-out interactions through the loop as it is (no delay, no added load)."""
+    loop = loops.get()
+    return {name: _run(loop, setup, name) for name in setup['held']}
+
+
+def _kept_its_promises(r, reference, kinematics):
+    """What the loop promises under delay and load: the right pattern, the hand within the
+    reference run's error + 0.5 cm, the last plan (conditioned on the final wrist position)
+    received and executed (the sim refused nothing), no point beyond the arm's limits in any
+    command, nothing non-finite."""
+    from mixture_ip_ros.app.closed_loop import points_beyond_limits
+    e = r.extra
+    assert r.chosen_pattern == r.true_pattern, r.name
+    assert _hand_error(r) < _hand_error(reference[r.name]) + 0.005, r.name
+    assert e['final_plan_received'], r.name
+    assert e['sim_rejections'] == 0, (r.name, e['last_rejection'])
+    assert e['commands'] and points_beyond_limits(e['commands'], kinematics) == 0, r.name
+    assert e['non_finite_commands'] == 0, r.name
+
+
+def test_three_held_out_interactions_in_process(loop, setup, reference):
+    records = [reference[name] for name in setup['held']]
     assert sorted(r.true_pattern for r in records) == ['plate', 'screw', 'screwdriver']
     for r in records:
         assert r.chosen_pattern == r.true_pattern, r.name
         assert r.commit_fraction is not None and 0 < r.commit_fraction < 1
-        assert np.linalg.norm(r.flange[-1] - r.target) < HAND_BOUND[r.true_pattern], r.name
+        assert _hand_error(r) < HAND_BOUND[r.true_pattern], r.name
         assert r.extra['non_finite_commands'] == 0
-        # the only rejections allowed are plans that arrived after their end (stale under load)
-        assert r.extra['sim_rejections'] == 0 or 'in the past' in r.extra['last_rejection']
-    # Deterministic on simulated time: the same interaction again ends at the same place.
+        assert r.extra['sim_rejections'] == 0, r.extra['last_rejection']
+        assert r.extra['final_plan_received'], r.name
+    # The same interaction again: the same pattern, the hand within its bound. Not the same
+    # end to the millimetre: the last plan is conditioned on the latest wrist sample the
+    # estimator has when the 'end' event comes (two topics), and which that is, among samples
+    # at rest 1 mm of noise apart, depends on how the callbacks interleave on a busy machine.
     again = _run(loop, setup, records[0].name)
     assert again.chosen_pattern == records[0].chosen_pattern
-    assert np.linalg.norm(again.flange[-1] - records[0].flange[-1]) < 2e-3
-    assert again.commit_fraction == pytest.approx(records[0].commit_fraction, abs=0.05)
+    assert _hand_error(again) < HAND_BOUND[again.true_pattern]
+    assert again.extra['sim_rejections'] == 0 and again.extra['final_plan_received']
 
 
 def test_bad_input_does_not_break_the_running_system(loop, setup):
@@ -92,7 +157,7 @@ def test_bad_input_does_not_break_the_running_system(loop, setup):
             raw_pub.publish(msg)
             loop.wait_until(lambda: observer.accepted + sum(observer.drop_counts.values())
                             > handled, timeout=10, what='the observer to take the pose')
-    traj_pub = node.create_publisher(JointTrajectory, '/iiwa/joint_trajectory',
+    traj_pub = node.create_publisher(JointTrajectory, '/joint_trajectory',
                                      QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
     rejected_before = loop.sim.rejection_count
     accepted_before = loop.sim.sim.accepted_count
@@ -191,8 +256,50 @@ def test_deactivating_the_estimator_mid_interaction_stops_the_robot(loop, setup)
     assert np.linalg.norm(r.flange[-1] - r.target) < 0.03
 
 
-def test_cross_process_one_interaction(setup, tmp_path):
+# Every command held this long (s of simulated time) on its way to the arm, each on one held-out
+# interaction of another pattern: 20 s of suite time, where all nine pairs would take a minute
+# (`mixture-ip demo --command-delay` runs them all, docs/results.md).
+DELAYED = {0.02: 'plate', 0.05: 'screw', 0.1: 'screwdriver'}
+
+
+def _busy_processes(n):
+    """``n`` processes that compete for the CPUs for as long as they run."""
+    return [subprocess.Popen([sys.executable, '-c', 'while True: pass']) for _ in range(n)]
+
+
+def test_the_loop_keeps_its_promises_with_two_busy_processes_beside_it(loop, setup,
+                                                                        reference):
+    """Two processes spinning on the 2 CPUs while the three held-out interactions replay: late
+    plans are re-timed by the sim, none is refused, every interaction ends as unloaded."""
+    from mixture_ip_ros.robot.kinematics import RobotKinematics
+    busy = _busy_processes(2)
+    try:
+        records = [_run(loop, setup, name) for name in setup['held']]
+    finally:
+        for p in busy:
+            p.kill()
+            p.wait()
+    kinematics = RobotKinematics()
+    for r in records:
+        _kept_its_promises(r, reference, kinematics)
+
+
+@pytest.mark.parametrize('delay', sorted(DELAYED))
+def test_the_loop_keeps_its_promises_when_every_command_is_late(loops, setup, reference,
+                                                                delay):
+    """Every command held ``delay`` s by a relay between the estimator and the sim (DDS on both
+    hops): the plans come after their first point was due and are re-timed, not refused."""
+    from mixture_ip_ros.robot.kinematics import RobotKinematics
+    loop = loops.get(command_delay=delay)
+    name = next(n for n in setup['held'] if setup['labels'][n] == DELAYED[delay])
+    r = _run(loop, setup, name)
+    assert r.extra['command_delay'] == delay
+    _kept_its_promises(r, reference, RobotKinematics())
+
+
+def test_cross_process_one_interaction(loops, setup, tmp_path):
     """The executables as separate processes (as `ros2 run` would start them)."""
+    loops.close()
     import rclpy
     from rclpy.context import Context
     from sensor_msgs.msg import JointState
@@ -226,7 +333,7 @@ def test_cross_process_one_interaction(setup, tmp_path):
         h.spin_until(lambda: len(joints) > 10, what='joint states from sim_node')
         # the estimator is up: its subscription to the observer is matched
         h.spin_until(lambda: h.probe.count_subscribers('/observer/wrist') >= 1
-                     and h.probe.count_publishers('/iiwa/joint_trajectory') >= 1,
+                     and h.probe.count_publishers('/joint_trajectory') >= 1,
                      what='the estimator')
         start('bag_player', 'use_sim_time:=true', 'rewrite_stamps:=true',
               "topics:=['/mocap/wrist']", 'start_delay:=2.0',   # cross-process discovery
@@ -281,9 +388,9 @@ def ur5_setup(tmp_path_factory):
     return {'data': data, 'labels': labels, 'held': held, 'model': model, 'targets': targets}
 
 
-def test_the_closed_loop_with_the_ur5(ur5_setup):
+def test_the_closed_loop_with_the_ur5(loops, ur5_setup):
     from mixture_ip_ros.app.closed_loop import ClosedLoop
-    # Its own domain: the iiwa's loop (module fixture) still runs on the first one.
+    loops.close()
     loop = ClosedLoop(ur5_setup['model'], robot='ur5', domain_id=private_domain_id(offset=1))
     try:
         assert loop.sim.sim.joint_names == list(loop.robot.joint_names)
@@ -299,4 +406,4 @@ def test_the_closed_loop_with_the_ur5(ur5_setup):
         assert np.linalg.norm(r.flange[-1] - r.target) < 1.2 * HAND_BOUND[r.true_pattern], r.name
         assert r.extra['tracking']['rms'] < 0.5e-3, r.name
         assert r.extra['non_finite_commands'] == 0
-        assert r.extra['sim_rejections'] == 0 or 'in the past' in r.extra['last_rejection']
+        assert r.extra['sim_rejections'] == 0, r.extra['last_rejection']

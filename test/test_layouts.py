@@ -8,20 +8,20 @@ import pytest
 from scipy.special import logsumexp
 from scipy.stats import multivariate_normal, norm
 
+from conftest import heldout_loglik
 from mixture_ip_ros.app.cli import main
 from mixture_ip_ros.app.evaluation import prepare
 from mixture_ip_ros.app.training import train, train_to_file
 from mixture_ip_ros.core.basis import GaussianBasis
 from mixture_ip_ros.core.demonstration import Demonstration, Layout
-from mixture_ip_ros.core.mixture import (PRIOR_SCALES, MixtureIProMP, calibrated_heldout_loglik,
-                                         heldout_loglik_by_components, loo_rms_by_components,
-                                         selection_curve)
+from mixture_ip_ros.core.mixture import MixtureIProMP, PRIOR_SCALES
+from mixture_ip_ros.core.selection import loo_rms_by_components, selection_curve
 from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.core.promp import observation_stats
 from mixture_ip_ros.io.csv_files import CsvError, load_csv_dataset, write_csv_demonstration
 from mixture_ip_ros.io.model_file import load_model, model_layout
 
-from mixture_ip_ros.scenarios.generated import generate
+from mixture_ip_ros.scenarios.folders import generate
 from mixture_ip_ros.scenarios.synthetic import mixture_demos
 
 
@@ -37,8 +37,7 @@ def test_layout_trains_saves_loads_and_recognises_online(tmp_path, P, Q):
     model, info = train_to_file(demos, tmp_path / 'm.npz', layout=layout, candidates=(1, 2, 3, 4),
                                 n_basis=8)
     assert info['n_components'] == 3 and info['selection']['clear_optimum']
-    assert info['selection']['criterion'] == ('loo' if Q else 'loglik')
-    assert info['selection']['heldout_loglik']['chosen'] == 3
+    assert info['selection']['criterion'] == 'patterns'
     loaded, meta = load_model(tmp_path / 'm.npz', observed_names=layout.observed,
                               controlled_names=layout.controlled)
     assert model_layout(meta) == layout
@@ -77,7 +76,7 @@ def test_demonstration_accepts_1d_arrays_and_no_controlled_agent():
 @pytest.mark.parametrize('Q', [0, 3])
 def test_heldout_loglik_finds_the_sampled_number_of_components(Q):
     demos = mixture_demos(seed=5, n_obs=2, n_ctrl=Q)[0]
-    ll = calibrated_heldout_loglik(demos, [1, 2, 3, 4, 5], n_basis=8)['scores']
+    ll = heldout_loglik(demos, [1, 2, 3, 4, 5], n_basis=8)['scores']
     curve = selection_curve(ll, higher_is_better=True, paired=True)
     assert [1, 2, 3, 4, 5][curve['index']] == 3 and curve['clear']
 
@@ -86,7 +85,7 @@ def test_heldout_loglik_picks_three_patterns_on_box_assembly():
     # The observed wrist alone cannot tell the patterns from one broad Gaussian (they differ in
     # the robot's posture); both agents at a calibrated within-pattern floor can.
     demos = prepare([g.to_demonstration() for g in generate('box_assembly', 0)], subsample=3)
-    cal = calibrated_heldout_loglik(demos, [1, 2, 3, 4], n_basis=10)
+    cal = heldout_loglik(demos, [1, 2, 3, 4], n_basis=10)
     curve = selection_curve(cal['scores'], higher_is_better=True, paired=True)
     assert [1, 2, 3, 4][curve['index']] == 3 and curve['clear']
     assert len(cal['prior_scale']) == 4 and set(cal['prior_scale']) <= set(PRIOR_SCALES)
@@ -95,16 +94,16 @@ def test_heldout_loglik_picks_three_patterns_on_box_assembly():
 def test_calibrated_curve_is_each_k_at_its_best_floor():
     demos = mixture_demos(seed=5, n_obs=1, n_ctrl=1)[0][::2]
     scales = (1.0, 0.01)
-    cal = calibrated_heldout_loglik(demos, [1, 3], scales, n_basis=6)
+    cal = heldout_loglik(demos, [1, 3], scales, n_basis=6)
     for a, K in enumerate([1, 3]):
-        curves = [heldout_loglik_by_components(demos, [K], n_basis=6, prior_scale=s)[0]
+        curves = [heldout_loglik(demos, [K], [s], n_basis=6)['scores'][0]
                   for s in scales]
         best = int(np.argmax([c.mean() for c in curves]))
         assert cal['prior_scale'][a] == scales[best]
         assert np.allclose(cal['scores'][a], curves[best])
         assert np.allclose(cal['mean_by_scale'][:, a], [c.mean() for c in curves])
     with pytest.raises(ValueError, match='prior_scales must be positive'):
-        calibrated_heldout_loglik(demos, [1], (0.1, -1.0), n_basis=6)
+        heldout_loglik(demos, [1], (0.1, -1.0), n_basis=6)
 
 
 def test_score_demonstrations_is_the_dense_marginal_likelihood_of_both_agents():
@@ -152,8 +151,8 @@ def test_one_sampled_component_gives_k1_and_a_flat_curve_is_reported_as_unclear(
     demos = mixture_demos(seed=6, counts=(30,), durations=((1.0, 1.6),), n_ctrl=0)[0]
     model, info = train(demos, candidates=(1, 2, 3), n_basis=8)
     sel = info['selection']
-    assert sel['criterion'] == 'loglik' and sel['chosen'] == 1
-    assert sel['heldout_loglik']['candidates'] == [1, 2, 3]
+    assert sel['criterion'] == 'patterns' and sel['chosen'] == 1
+    assert sel['candidates'] == [1, 2, 3] and model.n_components == 1
     rng = np.random.default_rng(0)
     flat = rng.normal(size=(4, 40)) + 100 * rng.normal(size=40)     # per-demo level, no K effect
     curve = selection_curve(flat, higher_is_better=True, paired=True)
@@ -227,7 +226,7 @@ def test_train_command_on_csv_files_single_agent(tmp_path):
     model, meta = load_model(out, observed_names=['ax', 'ay'], controlled_names=[])
     assert meta['observed_units'] == ['g', 'g'] and model.n_controlled_ == 0
     sel = meta['extra']['training']['selection']
-    assert sel['criterion'] == 'loglik' and sel['chosen'] == model.n_components == 3
+    assert sel['criterion'] == 'patterns' and sel['chosen'] == model.n_components == 3
     est = OnlineEstimator(model)
     for t, y in zip(demos[0].t, demos[0].observed):
         est.update(t, y)
@@ -280,15 +279,17 @@ def test_train_command_reports_a_bad_csv_in_one_line(tmp_path, capsys):
     assert len(err.splitlines()) == 1
 
 
-def test_training_reports_one_progress_count_over_both_curves():
+def test_training_reports_one_progress_count_over_its_fits():
+    """The thesis's criterion: the floors of every K on the folds, then leave-one-out, one
+    count; the pattern criterion: the chosen K's floor on the folds."""
     demos = mixture_demos(seed=14, counts=(5, 5), durations=((1.0, 1.2), (1.4, 1.6)),
                           n_obs=1, n_ctrl=1, n_basis=6)[0]
-    calls = []
-    model, info = train(demos, candidates=(1, 2), prior_scales=(1.0, 0.1), n_basis=6,
-                        progress=lambda done, total, K: calls.append((done, total)))
-    n_cal, n_loo = 2 * 2 * 5, 2 * len(demos)          # scales x K x folds, K x demonstrations
-    assert [d for d, _ in calls] == list(range(1, n_cal + n_loo + 1))
-    assert {t for _, t in calls} == {n_cal + n_loo}
-    sel = info['selection']
-    assert sel['prior_scale'] == sel['heldout_loglik']['prior_scale'][sel['chosen'] - 1]
-    assert model.prior_scale == sel['prior_scale']
+    for criterion, n_fits in (('loo', 2 * 2 * 5 + 2 * len(demos)), ('patterns', 2 * 5)):
+        calls = []
+        model, info = train(demos, candidates=(1, 2), prior_scales=(1.0, 0.1), n_basis=6,
+                            criterion=criterion,
+                            progress=lambda done, total, K: calls.append((done, total)))
+        assert [d for d, _ in calls] == list(range(1, n_fits + 1)), criterion
+        assert {t for _, t in calls} == {n_fits}
+        sel = info['selection']
+        assert model.prior_scale == sel['prior_scale'] == info['prior_scale']

@@ -112,7 +112,7 @@ class Observer:
         self.pose_pub = harness.publisher(PoseStamped, '/mocap/wrist', qos.sensor_data(100))
         self.points = harness.subscribe(PointStamped, '/observer/wrist', qos.reliable(5000))
         self.events = harness.subscribe(Header, '/observer/event', qos.reliable(5000))
-        harness.matched(self.pose_pub, self.node._obs_pub, self.node._event_pub)
+        harness.matched(self.pose_pub, self.node.observation_pub, self.node.event_pub)
 
     def handled(self):
         return self.node.accepted + sum(self.node.drop_counts.values())

@@ -1,5 +1,5 @@
-"""Every node's parameters come from one schema: the files in config/ and the README's tables
-are checked against it, and the nodes load those files as they are."""
+"""Every node's parameters come from one schema: the files in config/ and the tables in
+docs/parameters.md are checked against it, and the nodes load those files as they are."""
 
 from pathlib import Path
 import re
@@ -11,13 +11,15 @@ from rclpy.parameter import Parameter
 
 from mixture_ip_ros.core.share import config_path
 from mixture_ip_ros.nodes.bag_player import BagPlayerParameters
+from mixture_ip_ros.nodes.command_delay import CommandDelayParameters
 from mixture_ip_ros.nodes.estimator_node import EstimatorNode, EstimatorParameters
 from mixture_ip_ros.nodes.observer_node import ObserverNode, ObserverParameters
 from mixture_ip_ros.nodes.params import check_params_file, markdown_table, specs
-from mixture_ip_ros.nodes.sim_node import SimNode, SimParameters
+from mixture_ip_ros.nodes.recorder import RecorderParameters
+from mixture_ip_ros.nodes.sim_node import COMMAND_TOPIC, SimNode, SimParameters
 from mixture_ip_ros.robot.description import DEFAULT_ROBOT, load_description, shipped_robots
 
-README = Path(__file__).resolve().parents[1] / 'README.md'
+TABLES = Path(__file__).resolve().parents[1] / 'docs' / 'parameters.md'
 NODES = {'estimator_node': ('estimator.yaml', EstimatorParameters),
          'observer_node': ('observer.yaml', ObserverParameters),
          'sim_node': ('sim.yaml', SimParameters),
@@ -102,13 +104,13 @@ def test_an_unknown_robot_is_refused_naming_the_parameter(ros_context):
         SimNode(context=ros_context, parameter_overrides=[Parameter('robot', value='no_such_arm')])
 
 
-def test_the_readme_tables_are_the_schemas():
-    text = README.read_text()
+def test_the_parameter_tables_are_the_schemas():
+    text = TABLES.read_text()
     for node, (_, schema) in NODES.items():
         match = re.search(rf'<!-- parameters: {node} -->\n(.*?)\n<!-- end -->', text, re.S)
-        assert match, f'README has no parameter table for {node}'
+        assert match, f'docs/parameters.md has no parameter table for {node}'
         assert match.group(1).strip() == markdown_table(schema), (
-            f'README table of {node} is stale: regenerate it with `mixture-ip params {node}`')
+            f'the table of {node} is stale: mixture-ip params all --update docs/parameters.md')
 
 
 def test_a_check_names_the_parameter_and_the_rule():
@@ -128,11 +130,19 @@ def test_unknown_parameter_names_are_warned_about(ros_context, capfd):
     assert 'unknown parameters ignored: onset_sped' in capfd.readouterr().err
 
 
+def test_the_command_topic_names_no_robot_and_the_default_system_connects():
+    """The estimator (and the closed loop's relay and recorder) command the relative topic the
+    sim subscribes: in one namespace they meet, and the names fit any arm."""
+    assert not COMMAND_TOPIC.startswith('/')
+    assert (EstimatorParameters().trajectory_topic == CommandDelayParameters().output_topic
+            == RecorderParameters().trajectory_topic == COMMAND_TOPIC)
+
+
 def test_the_rviz_config_shows_the_nodes_topics_in_their_frame():
     rviz = yaml.safe_load(config_path('mixture_ip.rviz').read_text())['Visualization Manager']
     topics = {d['Topic']['Value'] for d in rviz['Displays'] if 'Topic' in d}
     est, obs = EstimatorParameters(), ObserverParameters()
     assert {est.marker_topic, est.path_topic, obs.observation_topic,
-            '/iiwa/flange_pose'} <= topics
+            '/flange_pose'} <= topics
     assert rviz['Global Options']['Fixed Frame'] == est.observed_frame == obs.base_frame \
         == SimParameters().base_frame

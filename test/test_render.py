@@ -5,13 +5,16 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from mixture_ip_ros.viz import render
 from mixture_ip_ros.scenarios.human_motion import reach
 from mixture_ip_ros.io.records import InteractionRecord
 from mixture_ip_ros.viz import human_model as human
 from mixture_ip_ros.robot.description import shipped_robots
 from mixture_ip_ros.robot.sim import RobotSimulation
 from mixture_ip_ros.robot.trajectory import points_from_arrays
+from mixture_ip_ros.viz.animation import render_interaction
+from mixture_ip_ros.viz.frames import TARGET_MARKER, InteractionRenderer, render_frames
+from mixture_ip_ros.viz.offscreen import rendering_available
+from mixture_ip_ros.viz.overlays import PALETTE
 
 REST = np.array([1.05, 0.12, 0.18])
 GOAL = np.array([0.80, 0.02, 0.32])
@@ -71,7 +74,7 @@ def record():
 
 @pytest.fixture(scope='module')
 def available():
-    ok, why = render.rendering_available()
+    ok, why = rendering_available()
     if not ok:
         pytest.skip(f'offscreen rendering unavailable: {why}')
     return ok
@@ -100,14 +103,14 @@ def test_frames_show_the_robot_moving(robot, available):
     robot_only.target = None
     w, h = 160, 120
     times = [0.0, 0.5, 1.95]        # commit at 0.7: the robot holds still, then moves
-    frames = render.render_frames(robot_only, times, width=w, height=h, overlay=False,
-                                  with_human=False)
+    frames = render_frames(robot_only, times, width=w, height=h, overlay=False,
+                           with_human=False)
     assert [f.shape for f in frames] == [(h, w, 3)] * 3
     assert all(f.dtype == np.uint8 and f.std() > 20 for f in frames)    # not blank
     # Where the robot's links are on screen at each time (body origins, projected).
     yy, xx = np.mgrid[0:h, 0:w]
     robot_area = np.zeros((h, w), bool)
-    with render.InteractionRenderer(robot_only, w, h, overlay=False, with_human=False) as r:
+    with InteractionRenderer(robot_only, w, h, overlay=False, with_human=False) as r:
         d = r.replay.robot
         assert d.name == robot
         bodies = ([r.model.body(d.base_frame).id]
@@ -132,16 +135,16 @@ def test_frames_show_the_robot_moving(robot, available):
 def test_overlay_bars_show_the_posterior(record, available):
     w, h = 320, 240
     t_query = 0.4       # between onset (0.3) and commit (0.7): no component dominates yet
-    before, during = render.render_frames(record, [0.0, t_query], width=w, height=h,
-                                          with_human=False)
-    with render.InteractionRenderer(record, w, h, with_human=False) as r:
+    before, during = render_frames(record, [0.0, t_query], width=w, height=h,
+                                   with_human=False)
+    with InteractionRenderer(record, w, h, with_human=False) as r:
         band_h = r.band_height
     assert before.shape == during.shape == (h, w, 3) and 40 < band_h < h // 2
     p = record.posterior[np.searchsorted(record.posterior_t, t_query, side='right') - 1]
 
     def bar_width(img, k):
         band = img[h - band_h:].astype(int)
-        mask = np.all(np.abs(band - np.array(render.PALETTE[k])) < 3, axis=2)
+        mask = np.all(np.abs(band - np.array(PALETTE[k])) < 3, axis=2)
         return int(mask.sum(axis=1).max())      # the longest run is the bar's length
 
     assert [bar_width(before, k) for k in range(3)] == [0, 0, 0]    # before onset: no belief
@@ -153,7 +156,7 @@ def test_overlay_bars_show_the_posterior(record, available):
 
 
 def test_human_wrist_follows_the_record(record, available):
-    with render.InteractionRenderer(record, 64, 48, overlay=False) as r:
+    with InteractionRenderer(record, 64, 48, overlay=False) as r:
         for tk in (0.0, 0.8, 1.0, 1.6):     # 1.0 is inside the occlusion gap: interpolated
             r.frame(tk)
             goal = r.replay.wrist_path(tk)
@@ -167,10 +170,36 @@ def test_human_wrist_follows_the_record(record, available):
     assert r.replay.wrist_observed(1.0) is None and r.replay.wrist_observed(0.8) is not None
 
 
+def test_a_partner_marker_follows_the_partners_hand_and_the_person_stands_where_told(
+        record, available):
+    """The interactions demo's record: the green marker at the partner's hand over time (hidden
+    where the tracker lost it), the human model's collar where the person's was."""
+    from dataclasses import replace
+    t = np.array([0.0, 0.5, 1.0, 1.5])
+    partner = np.array([[0.5, 0.0, 0.2], [0.6, 0.1, 0.3], [np.nan] * 3, [0.7, 0.1, 0.3]])
+    collar = (1.3, 0.2, 0.35, np.pi)
+    rec = replace(record, extra={**record.extra, 'partner': {'t': t.tolist(),
+                                                             'xyz': partner.tolist()},
+                                 'person1': list(collar), 'scene': {'table': False}})
+    with InteractionRenderer(rec, 64, 48, overlay=False) as r:
+        to_world = r.replay.robot.base_to_world()
+        marker = r.model.body(TARGET_MARKER).mocapid[0]
+        r.frame(0.6)
+        np.testing.assert_allclose(r.data.mocap_pos[marker],
+                                   to_world.apply_array(partner[1:2])[0])
+        r.frame(1.1)
+        assert r.data.mocap_pos[marker][2] < -10          # lost: out of sight
+        r.poser.relax(r.data)
+        mujoco.mj_kinematics(r.model, r.data)
+        np.testing.assert_allclose(r.data.xpos[r.model.body('human_right_clavicle').id],
+                                   collar[:3], atol=1e-6)
+        assert r.model.geom('floor').pos[2] == pytest.approx(collar[2] - human.collar_height())
+
+
 def test_render_interaction_writes_files(record, available, tmp_path):
     short = make_record(duration=1.0, onset=0.1, move=0.6, commit=0.3, robot_move=0.6,
                         gap=(0.4, 0.5))
-    paths = render.render_interaction(short, tmp_path / 'out', fps=10, width=160, height=120)
+    paths = render_interaction(short, tmp_path / 'out', fps=10, width=160, height=120)
     gif, sheet = paths['animation'], paths['contact_sheet']
     assert gif.is_file() and sheet.is_file()
     with Image.open(gif) as im:
@@ -191,7 +220,7 @@ def test_bad_record_is_rejected(record, available):
     bad = make_record(duration=0.2)
     bad.q = bad.q[:, :6]     # the iiwa has 7 joints
     with pytest.raises(ValueError, match='record.q'):
-        render.render_frames(bad, [0.0], width=32, height=32)
+        render_frames(bad, [0.0], width=32, height=32)
 
 
 def test_human_model_stands_on_the_floor():
@@ -208,10 +237,10 @@ def test_record_without_estimate_or_wrist_still_renders(available, tmp_path):
     rec.alpha = np.zeros(0)
     rec.onset_time = rec.commit_time = rec.end_time = rec.chosen_pattern = None
     rec.commit_fraction = rec.target = None
-    paths = render.render_interaction(rec, tmp_path, fps=5, width=160, height=120)
+    paths = render_interaction(rec, tmp_path, fps=5, width=160, height=120)
     with Image.open(paths['contact_sheet']) as im:
         assert im.size[0] == 2 * 160            # start and last frame only
-    with render.InteractionRenderer(rec, 64, 48, overlay=False) as r:
+    with InteractionRenderer(rec, 64, 48, overlay=False) as r:
         r.frame(0.3)
         # No wrist: the person stands relaxed and the wrist marker is hidden.
         assert r.model.site_rgba[r.model.site('human_wrist').id, 3] == 0
@@ -226,11 +255,12 @@ def test_unavailable_rendering_raises_runtime_error(tmp_path):
     code = (
         'import sys; sys.path.insert(0, %r)\n'
         'from test_render import make_record\n'
-        'from mixture_ip_ros.viz import render\n'
-        'ok, why = render.rendering_available()\n'
+        'from mixture_ip_ros.viz.animation import render_interaction\n'
+        'from mixture_ip_ros.viz.offscreen import rendering_available\n'
+        'ok, why = rendering_available()\n'
         'assert not ok and "PYOPENGL_PLATFORM" in why, why\n'
         'try:\n'
-        '    render.render_interaction(make_record(duration=0.2), %r)\n'
+        '    render_interaction(make_record(duration=0.2), %r)\n'
         'except RuntimeError as err:\n'
         '    assert "unavailable" in str(err); print("raised")\n'
     ) % (os.path.dirname(__file__), str(tmp_path))

@@ -177,7 +177,7 @@ def test_a_fourth_arm_needs_only_its_description_file(xarm, tmp_path):
     from mixture_ip_ros.robot.scene import FLANGE_SITE, build_scene
     from mixture_ip_ros.robot.sim import RobotSimulation
     from mixture_ip_ros.robot.trajectory import points_from_arrays
-    from mixture_ip_ros.scenarios import generated as S
+    from mixture_ip_ros.scenarios.box_assembly import box_assembly
     kin = RobotKinematics(xarm)
     assert kin.description.name == 'xarm7' and kin.dof == 7
     np.testing.assert_allclose(kin.velocity_limit, 3.14, atol=0.01)   # from the URDF
@@ -212,9 +212,9 @@ def test_a_fourth_arm_needs_only_its_description_file(xarm, tmp_path):
     assert 'unknown joint' in sim.set_trajectory(load_description().joint_names,
                                                  points_from_arrays(t, pos))
     # Its box-assembly demonstrations, and a model of them.
-    demos = S.box_assembly(seed=7, kinematics=kin, counts={'plate': 4, 'screw': 4,
-                                                            'screwdriver': 4})
-    iiwa = S.box_assembly(seed=7, counts={'plate': 4, 'screw': 4, 'screwdriver': 4})
+    demos = box_assembly(seed=7, kinematics=kin, counts={'plate': 4, 'screw': 4,
+                                                         'screwdriver': 4})
+    iiwa = box_assembly(seed=7, counts={'plate': 4, 'screw': 4, 'screwdriver': 4})
     same = [np.array_equal(a.wrist_xyz, b.wrist_xyz) for a, b in zip(demos, iiwa)
             if a.extra['attempt'] == b.extra['attempt']]
     assert len(same) >= 10 and all(same)

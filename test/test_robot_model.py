@@ -201,6 +201,37 @@ def test_ik_rejects_unreachable_and_bad_input(kin):
         kin.ik([0.5, 0.0, 0.3], np.zeros(6))
 
 
+def test_a_posture_preference_costs_no_accuracy_and_picks_the_posture_nearest_it(kin):
+    """The same targets from the same start: with a preferred posture the flange is as exact,
+    and the redundant joints end nearer that posture than without it."""
+    rng = np.random.default_rng(6)
+    preferred = HOME + np.array([0.0, 0.0, 0.6, 0.0, -0.5, 0.0, 0.4])
+    nearer = 0
+    for _ in range(20):
+        target = rng.uniform([0.45, -0.3, 0.15], [0.7, 0.3, 0.45])
+        free = kin.ik(target, HOME, restarts=0)
+        held = kin.ik(target, HOME, restarts=0, posture=preferred, posture_weight=0.05)
+        assert np.linalg.norm(kin.fk(held)[0] - target) < 1e-3
+        nearer += np.linalg.norm(held - preferred) < np.linalg.norm(free - preferred)
+    assert nearer == 20
+    with pytest.raises(ValueError, match='posture_weight'):
+        kin.ik([0.5, 0.0, 0.3], HOME, posture=HOME, posture_weight=-1.0)
+    with pytest.raises(ValueError, match='posture'):
+        kin.ik([0.5, 0.0, 0.3], HOME, posture=HOME[:3], posture_weight=0.1)
+
+
+def test_closest_reaches_what_ik_reaches_and_says_how_far_it_stays_otherwise(arm):
+    kin, _ = arm
+    home = kin.description.home_array()
+    target = kin.fk(home + 0.2)[0]
+    q, error = kin.closest(target, home)
+    assert error < 1e-3 and np.linalg.norm(kin.fk(q)[0] - target) == pytest.approx(error)
+    far = np.array([3.0, 0.0, 0.4])                 # beyond every arm's reach: no exception
+    q, error = kin.closest(far, home, limit_margin=0.05)
+    assert error == pytest.approx(np.linalg.norm(kin.fk(q)[0] - far)) and error > 1.5
+    assert kin.within_limits(q, margin=0.05 - 1e-9)
+
+
 def test_fk_positions_matches_fk(arm):
     kin, _ = arm
     Q = np.random.default_rng(5).uniform(kin.lower, kin.upper, size=(10, kin.dof))

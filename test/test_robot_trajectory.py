@@ -8,8 +8,10 @@ import pytest
 
 from mixture_ip_ros.robot.description import JOINT_NAMES, load_description, shipped_robots
 from mixture_ip_ros.robot.sim import RobotSimulation
-from mixture_ip_ros.robot.trajectory import (JointTrajectory, TrajectoryFollower, TrajectoryPoint,
-                                             points_from_arrays, validate_trajectory)
+from mixture_ip_ros.robot.trajectory import (REACH_RESOLUTION, JointTrajectory,
+                                             TrajectoryFollower, TrajectoryPoint, earliest_reach,
+                                             points_from_arrays, segment_coefficients,
+                                             validate_trajectory)
 
 J7 = list(JOINT_NAMES)   # the interpolation tests' joints (the default robot's)
 
@@ -282,16 +284,12 @@ def _probe_cases(sim):
         ('acceleration', [TrajectoryPoint(1.0, home.tolist(), rest, acc),
                           TrajectoryPoint(3.0, home.tolist(), rest, [0.0] * n)], None,
          ['acceleration', 'beyond']),
-        ('first point at -1 s, elsewhere', [TrajectoryPoint(-1.0, (home + 0.3).tolist(), rest),
-                                            TrajectoryPoint(2.0, home.tolist(), rest)], None,
-         ['first point (at or before now) jumps']),
-        ('first point at 0, elsewhere', [TrajectoryPoint(0.0, (home + 0.3).tolist(), rest)],
-         None, ['first point (at or before now) jumps']),
-        ('first point too soon', [TrajectoryPoint(0.05, (home + 0.3).tolist(), rest)], None,
-         ['first point (0.05 s from now) jumps']),
-        ('stamped so the first point is due now',
-         [TrajectoryPoint(1.0, (home + 0.3).tolist(), rest)], sim.time - 1.0,
-         ['at or before now']),
+        ('first point due 2 s before it arrived',
+         [TrajectoryPoint(-2.0, (home + 0.3).tolist(), rest),
+          TrajectoryPoint(2.0, home.tolist(), rest)], None,
+         ['stale', 'due 2 s before', 'max_delay 1 s']),
+        ('stamped 3 s ago, first point 1 s in', [TrajectoryPoint(1.0, home.tolist(), rest)],
+         sim.time - 3.0, ['stale', 'due 2 s before']),
         ('100,000 points', points_from_arrays(np.arange(1, 100_001) * 0.01,
                                               np.tile(home, (100_000, 1))), None,
          ['100000 points, more than the 10000 allowed']),
@@ -314,6 +312,141 @@ def test_the_simulation_refuses_what_a_controller_with_joint_limits_refuses(robo
     sim.step(200)                                            # the arm holds where it was
     np.testing.assert_allclose(sim.q, home, atol=1e-5)
     assert np.abs(sim.qd).max() < 1e-3
+
+
+# ---------------------------------------------------------------------- late trajectories
+
+def _dense_references(follower, t0, t1, q, qd, step=1e-4):
+    """The anchored follower's (q, qd, qdd) references every ``step`` s over [t0, t1]."""
+    times = np.arange(t0, t1 + step / 2, step)
+    return times, np.array([follower.sample(t, q, qd) for t in times])
+
+
+def _within(refs, limits, qd_now, margin=1e-9):
+    """Oracle: every sampled reference speed within the limit (or the present speed, which the
+    arm already has) and every acceleration within its limit."""
+    speed_bound = np.maximum(limits.velocity, np.abs(qd_now)) * (1 + margin)
+    return (np.abs(refs[:, 1]).max(axis=0) <= speed_bound).all() and \
+        (np.abs(refs[:, 2]).max(axis=0) <= limits.acceleration * (1 + margin)).all()
+
+
+def _late_cases(sim):
+    """(name, points, start) of trajectories that come too late for the arm of ``sim`` to
+    follow them as stamped: each is re-timed, none is refused."""
+    home, n = sim.description.home_array(), sim.dof
+    rest = [0.0] * n
+    away = (home + 0.1).tolist()         # a posture clear of the scene for every arm
+    return [
+        ('first point due 1 s before it arrived', [TrajectoryPoint(-1.0, away, rest),
+                                                   TrajectoryPoint(2.0, home.tolist(), rest)],
+         None),
+        ('first point due now, elsewhere', [TrajectoryPoint(0.0, away, rest)], None),
+        ('first point too soon', [TrajectoryPoint(0.05, away, rest)], None),
+        ('stamped so the first point is due now', [TrajectoryPoint(1.0, away, rest)],
+         sim.time - 1.0),
+        ('ends in the past', [TrajectoryPoint(0.1, away, rest),
+                              TrajectoryPoint(0.7, home.tolist(), rest)], sim.time - 0.9),
+        ('first point without velocities, too soon', [TrajectoryPoint(0.02, away)], None),
+    ]
+
+
+@pytest.mark.parametrize('robot', shipped_robots())
+def test_a_late_trajectory_is_retimed_from_the_present_state_not_refused(robot):
+    """Each late case is accepted and starts later; oracle: the anchored follower's references,
+    sampled every 0.1 ms from now to the first point, stay within the speed and acceleration
+    limits and reach the first point at its shifted time, then the trajectory's own points come
+    at their shifted times; the shift is the least that does (0.5 ms less breaks a limit); the
+    arm gets there."""
+    for name, points, start in _late_cases(RobotSimulation(robot=robot)):
+        logged = []
+        sim = RobotSimulation(robot=robot, logger=logged.append)
+        sim.step(50)
+        now, q, qd = sim.time, sim.q, sim.qd
+        assert sim.set_trajectory(sim.joint_names, points, start) is None, name
+        assert sim.retimed_count == 1 and sim.rejection_count == 0, name
+        assert len(logged) == 1 and 'trajectory late: re-timed to start' in logged[0]
+        delay = sim.last_delay
+        stamped = (now if start is None else start)
+        due = stamped + points[0].time_from_start
+        first = due + delay                              # the first point's shifted time
+        assert delay > 0 and first > now, name
+        traj = sim.follower._pending
+        assert traj.start_time == pytest.approx(stamped + delay, abs=1e-12)
+        # The follower, anchored now from the state now, as the next step anchors it.
+        follower = TrajectoryFollower(sim.dof)
+        follower.set(traj)
+        times, refs = _dense_references(follower, now, first, q, qd)
+        assert _within(refs, sim.limits, qd), name
+        np.testing.assert_allclose(follower.sample(first, q, qd)[0], points[0].positions,
+                                   atol=1e-9)
+        for p in points[1:]:
+            np.testing.assert_allclose(follower.sample(first + p.time_from_start
+                                                       - points[0].time_from_start, q, qd)[0],
+                                       p.positions, atol=1e-9)
+        # Least: the same blend 0.5 ms shorter breaks a limit.
+        if first - now > 1e-3:
+            shorter = JointTrajectory(**{**traj.__dict__, 'start_time': traj.start_time - 5e-4})
+            follower = TrajectoryFollower(sim.dof)
+            follower.set(shorter)
+            _, refs = _dense_references(follower, now, first - 5e-4, q, qd)
+            assert not _within(refs, sim.limits, qd), name
+        sim.step(int((first + points[-1].time_from_start - points[0].time_from_start
+                      - sim.time) / sim.dt) + 1000)
+        np.testing.assert_allclose(sim.q, points[-1].positions, atol=1e-3)
+
+
+@pytest.mark.parametrize('robot', shipped_robots())
+def test_a_trajectory_on_time_is_unchanged(robot):
+    """A first point the arm reaches in time within its limits: no shift, and the references
+    are those of the trajectory validated without the arm's state, bit for bit."""
+    sim = RobotSimulation(robot=robot)
+    home, n = sim.description.home_array(), sim.dof
+    points = [TrajectoryPoint(0.5, (home + 0.05).tolist(), [0.0] * n),
+              TrajectoryPoint(1.5, (home + 0.1).tolist(), [0.0] * n)]
+    assert sim.set_trajectory(sim.joint_names, points, sim.time) is None
+    assert sim.retimed_count == 0 and sim.follower._pending.delay == 0.0
+    plain = TrajectoryFollower(n)
+    plain.set(validate_trajectory(sim.joint_names, points, sim.time, sim.time, sim.joint_names))
+    q, qd = sim.q, sim.qd
+    for k in range(1600):
+        t = sim.time
+        expected = plain.sample(t, q, qd)
+        sim.step(1)
+        assert all(np.array_equal(a, b) for a, b in zip(sim.reference, expected))
+        q, qd = sim.q, sim.qd
+
+
+def test_earliest_reach_is_within_the_limits_and_nearly_least_on_random_states():
+    """Random present states (some moving faster than their limit), first points and limits:
+    the blend found is within the limits by dense sampling (the arm's own excess speed
+    tolerated), and no duration between the shortest asked for and 3 % less than it is (dense
+    sampling on a grid of durations; feasibility is not monotonic in the duration)."""
+    rng = np.random.default_rng(19)
+    for trial in range(100):
+        n = int(rng.integers(1, 8))
+        velocity = rng.uniform(0.5, 3.0, n)
+        acceleration = rng.uniform(5.0, 200.0, n)
+        q = rng.uniform(-2, 2, n)
+        qd = rng.uniform(-1.5, 1.5, n) * velocity
+        p1 = q + rng.normal(0, 0.3, n)
+        v1 = rng.uniform(-1, 1, n) * velocity
+        kind = 'cubic' if trial % 4 else 'linear'
+        shortest = float(rng.choice([0.001, 0.02, 0.1]))
+        T = earliest_reach(q, qd, p1, v1, kind, velocity, acceleration, shortest)
+        assert T is not None and T >= shortest
+
+        def dense_ok(T, samples=2001):
+            s = np.linspace(0.0, T, samples)[:, None]
+            c = segment_coefficients(T, q, qd, 0 * q, p1, v1, 0 * q, kind)
+            v = c[1] + 2 * c[2] * s + 3 * c[3] * s ** 2
+            a = 2 * c[2] + 6 * c[3] * s
+            bound = velocity if kind == 'linear' else np.maximum(velocity, np.abs(qd))
+            return (np.abs(v) <= bound * (1 + 1e-9)).all() and \
+                (np.abs(a) <= acceleration * (1 + 1e-9)).all()
+        assert dense_ok(T), trial
+        if T > 1.03 * shortest:
+            shorter = np.geomspace(shortest, T / 1.03, 60)
+            assert not any(dense_ok(t, 501) for t in shorter), trial
 
 
 @pytest.mark.parametrize('robot', shipped_robots())

@@ -7,16 +7,23 @@ import json
 import numpy as np
 import pytest
 
-from mixture_ip_ros.scenarios import generated as S
 from mixture_ip_ros.io.bags import read_bag
 from mixture_ip_ros.io.dataset import load_dataset
 from mixture_ip_ros.robot.description import shipped_robots
 from mixture_ip_ros.robot.kinematics import RobotKinematics
 from mixture_ip_ros.robot.scene import POLE_HEIGHT, POLE_RADIUS, POLE_XY
+from mixture_ip_ros.scenarios.arm import ROTATION_TOL
+from mixture_ip_ros.scenarios.box_assembly import (BOX_LABELS, PLATE_OFFSET, SCREW_HANDOVER,
+                                                   SCREWDRIVER_OFFSET, box_assembly)
+from mixture_ip_ros.scenarios.folders import (generate, read_labels, read_scenario_robot,
+                                              write_scenario_bags)
+from mixture_ip_ros.scenarios.letters import missing_data_letters, phase_letters
+from mixture_ip_ros.scenarios.pole import (FLANGE_FROM_SPOT, POLE_BOTH_SIDES_Y, WAND_OFFSET,
+                                           _pointing_rotation, pole)
 
 ROBOTS = shipped_robots()
 # An arm without a spare joint cannot pass the pole on both sides of a spot near the middle
-# (generated.pole raises and says so): the UR5's pole set has every spot on one side only.
+# (pole() raises and says so): the UR5's pole set has every spot on one side only.
 POLE_KWARGS = {'ur5': {'both_sides': 0}}
 
 
@@ -32,12 +39,12 @@ def kin(kins):
 
 @pytest.fixture(scope='module')
 def boxes(kins):
-    return {r: S.box_assembly(seed=7, kinematics=k) for r, k in kins.items()}
+    return {r: box_assembly(seed=7, kinematics=k) for r, k in kins.items()}
 
 
 @pytest.fixture(scope='module')
 def poles(kins):
-    return {r: S.pole(seed=3, kinematics=k, **POLE_KWARGS.get(r, {})) for r, k in kins.items()}
+    return {r: pole(seed=3, kinematics=k, **POLE_KWARGS.get(r, {})) for r, k in kins.items()}
 
 
 @pytest.fixture(scope='module')
@@ -59,12 +66,12 @@ def _same(a, b):
 
 
 def test_box_assembly_is_reproducible_and_shuffled(kin, box):
-    _same(box, S.box_assembly(seed=7, kinematics=kin))
-    other = S.box_assembly(seed=8, kinematics=kin)
+    _same(box, box_assembly(seed=7, kinematics=kin))
+    other = box_assembly(seed=8, kinematics=kin)
     assert not np.array_equal(box[0].wrist_xyz[:50], other[0].wrist_xyz[:50])
     labels = [d.label for d in box]
-    assert {lab: labels.count(lab) for lab in S.BOX_LABELS} == {'plate': 15, 'screw': 20,
-                                                                'screwdriver': 13}
+    assert {lab: labels.count(lab) for lab in BOX_LABELS} == {'plate': 15, 'screw': 20,
+                                                              'screwdriver': 13}
     assert [d.name for d in box] == [f'demo_{i:03d}' for i in range(48)]
     # Unlabeled in practice: the order does not group the patterns.
     changes = sum(a != b for a, b in zip(labels, labels[1:]))
@@ -117,13 +124,13 @@ def test_flange_meets_the_hand_for_plate_and_screwdriver(kins, boxes, robot):
         p_end = to_world.apply_array(p_base)                 # the world frame of the human
         axis = (to_world.rotation @ R_base @ tool.T)[:, 2]   # the tool's approach axis
         if d.label == 'plate':
-            np.testing.assert_allclose(p_end, d.wrist_goal + S.PLATE_OFFSET, atol=3e-3)
-            assert axis[2] < -np.cos(S.ROTATION_TOL)  # carried gripper-down
+            np.testing.assert_allclose(p_end, d.wrist_goal + PLATE_OFFSET, atol=3e-3)
+            assert axis[2] < -np.cos(ROTATION_TOL)  # carried gripper-down
         elif d.label == 'screwdriver':
-            np.testing.assert_allclose(p_end, d.wrist_goal + S.SCREWDRIVER_OFFSET, atol=3e-3)
+            np.testing.assert_allclose(p_end, d.wrist_goal + SCREWDRIVER_OFFSET, atol=3e-3)
             assert axis[2] > -0.2 and axis[0] > 0.9  # pointing at the human
         else:
-            assert np.linalg.norm(p_end - S.SCREW_HANDOVER) < 0.03
+            assert np.linalg.norm(p_end - SCREW_HANDOVER) < 0.03
         if d.label != 'screw':
             gap = np.linalg.norm(p_end - d.wrist_goal)
             assert 0.05 < gap < 0.15  # close, but not colliding
@@ -148,15 +155,15 @@ def test_the_human_side_does_not_depend_on_the_robot(boxes):
 
 
 def test_patterns_differ_where_the_human_reaches(box):
-    goals = {lab: np.array([d.wrist_goal for d in box if d.label == lab]) for lab in S.BOX_LABELS}
+    goals = {lab: np.array([d.wrist_goal for d in box if d.label == lab]) for lab in BOX_LABELS}
     centres = {lab: g.mean(axis=0) for lab, g in goals.items()}
-    for a in S.BOX_LABELS:
-        for b in S.BOX_LABELS:
+    for a in BOX_LABELS:
+        for b in BOX_LABELS:
             if a < b:
                 assert np.linalg.norm(centres[a] - centres[b]) > 0.25
     # Every two patterns' wrist end positions are separated by >= 5 cm along some axis.
-    for a in S.BOX_LABELS:
-        for b in S.BOX_LABELS:
+    for a in BOX_LABELS:
+        for b in BOX_LABELS:
             if a < b:
                 gap = np.maximum(goals[b].min(axis=0) - goals[a].max(axis=0),
                                  goals[a].min(axis=0) - goals[b].max(axis=0))
@@ -168,7 +175,7 @@ def test_patterns_differ_where_the_human_reaches(box):
 
 
 def test_durations_spread(box, pole_demos):
-    for lab in S.BOX_LABELS:
+    for lab in BOX_LABELS:
         dur = [d.duration for d in box if d.label == lab]
         assert max(dur) / min(dur) >= 1.5, lab
     dur = [d.duration for d in pole_demos]
@@ -182,7 +189,7 @@ def test_human_reach_shapes_vary(box):
 
 
 def test_occlusion_gaps(kin):
-    demos = S.box_assembly(seed=2, occlusion=1.0, counts={'plate': 3, 'screw': 3}, kinematics=kin)
+    demos = box_assembly(seed=2, occlusion=1.0, counts={'plate': 3, 'screw': 3}, kinematics=kin)
     for d in demos:
         missing = np.isnan(d.wrist_xyz).any(axis=1)
         assert np.isnan(d.wrist_xyz[missing]).all()
@@ -219,12 +226,12 @@ def test_pole_demos_avoid_the_pole_and_split_into_two_sides(kins, poles, robot):
         p_end = to_world.apply_array(p_base)
         tool_axis = (to_world.rotation @ R_base @ tool.T)[:, 2]
         spot = d.extra['spot']
-        axis = S._pointing_rotation(1 if d.label == 'left' else -1)[:, 2]
-        np.testing.assert_allclose(p_end, spot - S.FLANGE_FROM_SPOT * axis, atol=2.5e-3)
-        assert tool_axis @ axis > np.cos(S.ROTATION_TOL + 1e-6)
-        np.testing.assert_allclose(d.wrist_goal - spot, S.WAND_OFFSET, atol=0.04)
+        axis = _pointing_rotation(1 if d.label == 'left' else -1)[:, 2]
+        np.testing.assert_allclose(p_end, spot - FLANGE_FROM_SPOT * axis, atol=2.5e-3)
+        assert tool_axis @ axis > np.cos(ROTATION_TOL + 1e-6)
+        np.testing.assert_allclose(d.wrist_goal - spot, WAND_OFFSET, atol=0.04)
         assert (d.label == 'left') == (tool_axis[1] < 0)  # tilted in from its side
-        if abs(spot[1]) > S.POLE_BOTH_SIDES_Y:
+        if abs(spot[1]) > POLE_BOTH_SIDES_Y:
             assert d.label == ('left' if spot[1] > 0 else 'right')
 
 
@@ -242,22 +249,22 @@ def test_pole_same_spot_both_sides_gives_very_different_postures(poles, robot):
 
 
 def test_pole_is_reproducible(kin, pole_demos):
-    a = S.pole(seed=5, n=6, both_sides=1, kinematics=kin)
-    _same(a, S.pole(seed=5, n=6, both_sides=1, kinematics=kin))
+    a = pole(seed=5, n=6, both_sides=1, kinematics=kin)
+    _same(a, pole(seed=5, n=6, both_sides=1, kinematics=kin))
     assert not np.array_equal(a[0].wrist_xyz[:50], pole_demos[0].wrist_xyz[:50])
 
 
 @pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
 def test_generate_write_load_round_trip(tmp_path, kin, storage):
     from mixture_ip_ros.core.segmentation import segment_motion
-    demos = S.box_assembly(seed=1, occlusion=0.5, kinematics=kin,
-                           counts={'plate': 2, 'screw': 2, 'screwdriver': 2})
-    paths = S.write_scenario_bags('box_assembly', tmp_path / 'bags', seed=1, storage=storage,
-                                  demos=demos)
+    demos = box_assembly(seed=1, occlusion=0.5, kinematics=kin,
+                         counts={'plate': 2, 'screw': 2, 'screwdriver': 2})
+    paths = write_scenario_bags('box_assembly', tmp_path / 'bags', seed=1, storage=storage,
+                                demos=demos)
     assert [p.name for p in paths] == [d.name for d in demos]
     labels = json.loads((tmp_path / 'bags' / 'labels.json').read_text())
     assert labels['labels'] == {d.name: d.label for d in demos}
-    assert S.read_labels(tmp_path / 'bags') == labels['labels']
+    assert read_labels(tmp_path / 'bags') == labels['labels']
     for d, path in zip(demos, paths):
         rec = read_bag(path)
         present = ~np.isnan(d.wrist_xyz).any(axis=1)
@@ -283,7 +290,7 @@ def test_generate_write_load_round_trip(tmp_path, kin, storage):
         np.testing.assert_allclose(x.controlled, expect_q, atol=1e-9)
         assert abs(x.duration - (end - onset)) < 0.011
     with pytest.raises(ValueError, match='not empty'):
-        S.write_scenario_bags('box_assembly', tmp_path / 'bags', demos=demos)
+        write_scenario_bags('box_assembly', tmp_path / 'bags', demos=demos)
 
 
 def test_another_robots_bags_carry_its_joints_and_load_into_its_base_frame(tmp_path, kins):
@@ -292,10 +299,10 @@ def test_another_robots_bags_carry_its_joints_and_load_into_its_base_frame(tmp_p
     from mixture_ip_ros.robot.description import load_description
     panda = load_description('panda')
     assert panda.mount_xyz != (0.0, 0.0, 0.0)
-    demos = S.box_assembly(seed=1, kinematics=kins['panda'],
-                           counts={'plate': 1, 'screw': 1, 'screwdriver': 1})
-    S.write_scenario_bags('box_assembly', tmp_path / 'bags', seed=1, demos=demos)
-    assert S.read_scenario_robot(tmp_path / 'bags') == 'panda'
+    demos = box_assembly(seed=1, kinematics=kins['panda'],
+                         counts={'plate': 1, 'screw': 1, 'screwdriver': 1})
+    write_scenario_bags('box_assembly', tmp_path / 'bags', seed=1, demos=demos)
+    assert read_scenario_robot(tmp_path / 'bags') == 'panda'
     rec = read_bag(tmp_path / 'bags' / demos[0].name, joint_names=panda.joint_names)
     assert rec.joint_names == panda.joint_names and rec.wrist_frame == 'world'
     with pytest.raises(ValueError):   # not the iiwa's joints
@@ -311,8 +318,8 @@ def test_another_robots_bags_carry_its_joints_and_load_into_its_base_frame(tmp_p
         np.testing.assert_allclose(truth.observed[-1], x.observed[-1], atol=0.005)
         assert x.controlled.shape[1] == 7
     with pytest.raises(ValueError, match='several robots'):
-        S.write_scenario_bags('box_assembly', tmp_path / 'mixed',
-                              demos=demos + S.box_assembly(seed=1, counts={'plate': 1}))
+        write_scenario_bags('box_assembly', tmp_path / 'mixed',
+                            demos=demos + box_assembly(seed=1, counts={'plate': 1}))
 
 
 def test_to_demonstration_uses_the_true_interval(box):
@@ -323,9 +330,9 @@ def test_to_demonstration_uses_the_true_interval(box):
 
 
 def test_phase_letters(tmp_path):
-    data = S.phase_letters(seed=0)
+    data = phase_letters(seed=0)
     assert len(data.train) == len(data.test) == 20
-    again = S.phase_letters(seed=0)
+    again = phase_letters(seed=0)
     np.testing.assert_array_equal(data.train[3].observed, again.train[3].observed)
     steps = np.array([d.t.size for d in data.train + data.test])
     assert steps.min() >= 350 and steps.max() <= 1131 and steps.max() / steps.min() > 1.5
@@ -343,7 +350,7 @@ def test_phase_letters(tmp_path):
 
 
 def test_missing_data_letters():
-    data = S.missing_data_letters(seed=0)
+    data = missing_data_letters(seed=0)
     for d, full in zip(data.train, data.train_complete):
         missing = np.isnan(d.observed).all(axis=1)
         assert missing.sum() == 180
@@ -352,11 +359,11 @@ def test_missing_data_letters():
         np.testing.assert_array_equal(d.observed[~missing], full.observed[~missing])
     assert all(not np.isnan(d.observed).any() for d in data.test)
     with pytest.raises(ValueError, match='does not fit'):
-        S.missing_data_letters(seed=0, gap_steps=5000)
+        missing_data_letters(seed=0, gap_steps=5000)
 
 
 def test_unknown_scenario_and_patterns(tmp_path):
     with pytest.raises(ValueError, match='unknown scenario'):
-        S.generate('juggling')
+        generate('juggling')
     with pytest.raises(ValueError, match='unknown box-assembly patterns'):
-        S.box_assembly(counts={'hammer': 3})
+        box_assembly(counts={'hammer': 3})

@@ -1,9 +1,12 @@
-"""Training: K by leave-one-out, the final fit with the method asked for."""
+"""Training: K by the pattern criterion or the thesis's leave-one-out, the covariance floor
+calibrated for the chosen K, the final fit with the method asked for, and its progress."""
+
+import io
 
 import numpy as np
 
 from mixture_ip_ros.core.demonstration import Demonstration
-from mixture_ip_ros.app.training import train
+from mixture_ip_ros.app.training import text_progress, train
 
 from mixture_ip_ros.scenarios.synthetic import mixture_demos
 
@@ -19,7 +22,7 @@ def test_em_training_chooses_k_on_regression_fits_and_fits_the_model_by_em():
         ctrl[lo:lo + n // 5] = np.nan
         gappy.append(Demonstration(d.t, obs, ctrl, label=d.label))
     model, info = train(gappy, candidates=range(1, 6), method='em', n_basis=8)
-    assert info['loo_method'] == 'regression' and info['n_components'] == 3
+    assert info['selection']['criterion'] == 'patterns' and info['n_components'] == 3
     assert model.method == 'em' and model.n_iter_ > 2
     assert np.all(np.diff(model.log_likelihood_) >= -1e-8 * np.abs(model.log_likelihood_[1:]))
     # every pattern in a component of its own
@@ -32,23 +35,57 @@ def test_leave_one_out_floor_is_the_one_its_own_criterion_prefers():
     """The covariance floor of the leave-one-out curve (and of the model) is the one that
     predicts the controlled agent best on the held-out folds, not the held-out likelihood's."""
     demos = mixture_demos(seed=0)[0]
-    model, info = train(demos, candidates=range(1, 5), n_basis=8)
+    model, info = train(demos, candidates=range(1, 5), n_basis=8, criterion='loo')
     sel = info['selection']
-    from mixture_ip_ros.core.mixture import calibrated_heldout_curves, loo_rms_by_components
+    from mixture_ip_ros.core.selection import calibrated_heldout_curves, loo_rms_by_components
     curves = calibrated_heldout_curves(demos, [1, 2, 3, 4], (), n_basis=8, method='regression')
-    assert sel['loo_rms']['prior_scale'] == curves['controlled_rms']['prior_scale']
-    assert sel['heldout_loglik']['prior_scale'] == curves['loglik']['prior_scale']
+    assert sel['prior_scales'] == curves['controlled_rms']['prior_scale']
     K = info['n_components']
     assert model.prior_scale == sel['prior_scale'] == curves['controlled_rms']['prior_scale'][K - 1]
     rms = loo_rms_by_components(demos, [K], n_basis=8, method='regression',
                                 prior_scale=model.prior_scale)
-    assert np.allclose(sel['loo_rms']['mean'][K - 1], rms.mean(), rtol=1e-12)
+    assert np.allclose(sel['mean'][K - 1], rms.mean(), rtol=1e-12)
     # Leave-one-out trains on more demonstrations than a held-out fold: a K only it can fit
     # takes the floor of the largest K the folds calibrated.
     few = demos[::4]
-    _, info = train(few, candidates=range(1, len(few)), n_basis=8)
-    held = info['selection']['heldout_loglik']['candidates']
-    loo = info['selection']['loo_rms']
-    assert loo['candidates'][-1] > held[-1]
-    assert loo['prior_scale'][len(held):] == [loo['prior_scale'][len(held) - 1]] * (
-        len(loo['candidates']) - len(held))
+    _, info = train(few, candidates=range(1, len(few)), n_basis=8, criterion='loo')
+    loo = info['selection']
+    n_train = len(few) - int(np.ceil(len(few) / 5))
+    assert loo['candidates'][-1] > n_train
+    assert loo['prior_scales'][n_train:] == [loo['prior_scales'][n_train - 1]] * (
+        len(loo['candidates']) - n_train)
+
+
+def test_the_pattern_criterion_model_takes_the_floor_calibrated_for_its_k():
+    """K by the pattern space, then the robot's floor of that K on the held-out folds (as
+    calibrated_heldout_curves picks it), and the model fitted there."""
+    demos = mixture_demos(seed=0)[0]
+    model, info = train(demos, candidates=range(1, 5), n_basis=8)
+    from mixture_ip_ros.core.selection import calibrated_heldout_curves
+    K = info['n_components']
+    assert K == 3 and info['selection']['criterion'] == 'patterns'
+    curves = calibrated_heldout_curves(demos, [K], (), n_basis=8, method='regression')
+    assert model.prior_scale == info['prior_scale'] == curves['controlled_rms']['prior_scale'][0]
+    given, given_info = train(demos, n_components=3, n_basis=8)
+    assert given.prior_scale == model.prior_scale and 'selection' not in given_info
+
+
+class _Terminal(io.StringIO):
+    def isatty(self):
+        return True
+
+
+def test_progress_is_a_bar_in_place_on_a_terminal_and_a_few_lines_otherwise():
+    """570 fits: on a terminal one line redrawn in place (carriage returns, one newline at the
+    end); written to a file or a pipe, a line at each quarter, not one per fit."""
+    terminal, log = _Terminal(), io.StringIO()
+    for stream in (terminal, log):
+        show = text_progress(stream)
+        for done in range(1, 571):
+            show(done, 570, 1 + done // 100)
+    assert terminal.getvalue().count('\r') == 570 and terminal.getvalue().count('\n') == 1
+    assert terminal.getvalue().endswith('570/570\n')
+    lines = log.getvalue().splitlines()
+    assert '\r' not in log.getvalue()
+    assert lines == ['choosing K: 143/570 fits (25 %)', 'choosing K: 285/570 fits (50 %)',
+                     'choosing K: 428/570 fits (75 %)', 'choosing K: 570/570 fits (100 %)']

@@ -8,6 +8,8 @@ import os
 import sys
 from pathlib import Path
 
+from mixture_ip_ros.nodes.launch import set_process_defaults
+
 
 # -- argument types: every option is checked before any work starts -----------------------------
 def _bounded(kind, low=None, high=None, name='a number'):
@@ -59,7 +61,7 @@ def _writable_parent(path, text):
 
 
 def _generate(args):
-    from mixture_ip_ros.scenarios.generated import write_scenario_bags
+    from mixture_ip_ros.scenarios.folders import write_scenario_bags
     bags = write_scenario_bags(args.scenario, Path(args.out), seed=args.seed,
                                occlusion=args.occlusion, storage=args.storage, robot=args.robot)
     print(f'wrote {len(bags)} {args.scenario} demonstrations ({args.storage} bags, '
@@ -77,14 +79,8 @@ def _train(args):
     if args.observation_noise is not None:
         kwargs['observation_noise'] = _floats(args.observation_noise, '--observation-noise')
     if args.csv is not None:
-        from mixture_ip_ros.core.demonstration import Layout
-        from mixture_ip_ros.io.csv_files import load_csv_dataset, parse_names
-        observed = parse_names(args.observed, '--observed')
-        if not observed:
-            raise ValueError('--csv needs --observed NAME[,NAME...] (the observed columns)')
-        controlled = parse_names(args.controlled, '--controlled')
-        layout = Layout(observed, controlled, parse_names(args.observed_units, '--observed-units')
-                        or None, parse_names(args.controlled_units, '--controlled-units') or None)
+        from mixture_ip_ros.io.csv_files import load_csv_dataset
+        layout = _csv_layout(args)
         demos = load_csv_dataset(args.csv, layout, time=args.time)
         kwargs['observed_frame'] = args.frame or ''
     else:
@@ -122,10 +118,39 @@ def _floats(text, what):
 
 
 def _evaluate(args):
-    from mixture_ip_ros.app.evaluation import evaluate
-    metrics = evaluate(args.scenario, Path(args.out), seed=args.seed, quick=args.quick,
-                       bag_dir=args.bags, robot=args.robot)
+    if (args.scenario is None) == (args.csv is None):
+        raise ValueError('give --scenario NAME or --csv DIR (one of them)')
+    if args.csv is None:
+        if args.labels or args.observed or args.controlled:
+            raise ValueError('--labels/--observed/--controlled go with --csv')
+        from mixture_ip_ros.app.evaluation import evaluate
+        metrics = evaluate(args.scenario, Path(args.out), seed=args.seed, quick=args.quick,
+                           bag_dir=args.bags, robot=args.robot)
+    else:
+        from mixture_ip_ros.app.evaluation import evaluate_csv
+        if args.labels is None:
+            raise ValueError('--csv needs --labels FILE (a JSON object: file name -> label)')
+        try:
+            labels = json.loads(Path(args.labels).read_text())
+        except (OSError, ValueError) as error:
+            raise ValueError(f'--labels {args.labels}: not a readable JSON file ({error})') from None
+        if not isinstance(labels, dict):
+            raise ValueError(f'--labels {args.labels}: must be a JSON object, file name -> label')
+        metrics = evaluate_csv(args.csv, labels, _csv_layout(args), Path(args.out),
+                               time_column=args.time, seed=args.seed, quick=args.quick)
     print(json.dumps(metrics, indent=1))
+
+
+def _csv_layout(args):
+    """The layout --observed/--controlled (and their units) name."""
+    from mixture_ip_ros.core.demonstration import Layout
+    from mixture_ip_ros.io.csv_files import parse_names
+    observed = parse_names(args.observed, '--observed')
+    if not observed:
+        raise ValueError('--csv needs --observed NAME[,NAME...] (the observed columns)')
+    controlled = parse_names(args.controlled, '--controlled')
+    return Layout(observed, controlled, parse_names(args.observed_units, '--observed-units')
+                  or None, parse_names(args.controlled_units, '--controlled-units') or None)
 
 
 def _demo(args):
@@ -189,6 +214,20 @@ def _add_robot(parser):
                              f'{DEFAULT_ROBOT}')
 
 
+def _add_csv_columns(parser):
+    parser.add_argument('--observed', default=None,
+                        help='observed agent columns, e.g. x,y,z (--csv)')
+    parser.add_argument('--controlled', default=None,
+                        help='controlled agent columns (--csv; none: a single-agent model)')
+    parser.add_argument('--time', default='t',
+                        help="time column in seconds (--csv; default 't')")
+    parser.add_argument('--observed-units', default=None,
+                        help='unit of each observed column, or one for all, e.g. m (recorded in '
+                             'the model)')
+    parser.add_argument('--controlled-units', default=None,
+                        help="unit of each controlled column (all 'm': errors in cm)")
+
+
 class _Parser(argparse.ArgumentParser):
     """Wrong arguments: one line saying what is wrong (and where the help is), exit code 2."""
 
@@ -217,29 +256,24 @@ def build_parser():
     t.add_argument('--csv', default=None, metavar='DIR', type=_existing_dir,
                    help='folder of CSV files instead: a time column and named columns; each file '
                         'is one movement, its first row the onset')
-    t.add_argument('--observed', default=None, help='observed agent columns, e.g. x,y,z (--csv)')
-    t.add_argument('--controlled', default=None,
-                   help='controlled agent columns (--csv; none: a single-agent model)')
-    t.add_argument('--time', default='t', help="time column in seconds (--csv; default 't')")
-    t.add_argument('--observed-units', default=None,
-                   help='unit of each observed column, or one for all, e.g. m (recorded in the model)')
-    t.add_argument('--controlled-units', default=None, help='unit of each controlled column')
+    _add_csv_columns(t)
     t.add_argument('--frame', default=None,
                    help='frame the observed agent is expressed in (recorded in the model; bags: '
                         'iiwa_link_0)')
     t.add_argument('--out', required=True, type=_new_file, help='model file (.npz)')
     t.add_argument('--components', type=_bounded(int, 1, name='a whole number'), default=None,
                    help='number of components (default: chosen over 1..--max-components)')
-    t.add_argument('--criterion', choices=['auto', 'loo', 'loglik'], default='auto',
-                   help="how K is chosen: 'loo' leave-one-out RMS of the controlled agent (the "
-                        "thesis), 'loglik' cross-validated log-likelihood of the observed agent; "
-                        "'auto' = loo with a controlled agent, else loglik")
+    t.add_argument('--criterion', choices=['auto', 'patterns', 'loo'], default='auto',
+                   help="how K is chosen: 'patterns' the leave-one-out likelihood of held-out "
+                        "demonstrations in the space where patterns are found (both agents' "
+                        "paths), 'loo' the leave-one-out RMS of the controlled agent given the "
+                        "final observed position (the thesis); 'auto' = patterns")
     t.add_argument('--noise', choices=['tied', 'per_component'], default='tied',
                    help='observation noise per DOF shared by all components (tied) or per component')
     t.add_argument('--observation-noise', default=None,
                    help='extra online sensor noise std, one number or one per observed DOF, in '
                         'their units (default: 0.01 for a wrist in m from bags, else 0)')
-    t.add_argument('--max-components', type=_bounded(int, 1, name='a whole number'), default=6)
+    t.add_argument('--max-components', type=_bounded(int, 1, name='a whole number'), default=9)
     t.add_argument('--n-basis', type=_bounded(int, 2, name='a whole number'), default=15)
     t.add_argument('--method', choices=['regression', 'em'], default='regression',
                    help="'em' learns from demonstrations with missing data (occlusions)")
@@ -247,9 +281,17 @@ def build_parser():
     _add_robot(t)
     t.set_defaults(func=_train)
 
-    e = sub.add_parser('evaluate', help="reproduce the thesis's experiments: plots + metrics.json")
-    e.add_argument('--scenario', required=True,
-                   choices=['box_assembly', 'pole', 'phase', 'missing_data', 'gestures'])
+    e = sub.add_parser('evaluate', help="the thesis's experiments, real recordings or your own "
+                                        'labelled CSV recordings: plots + metrics.json')
+    e.add_argument('--scenario', default=None,
+                   choices=['box_assembly', 'pole', 'phase', 'missing_data', 'gestures',
+                            'interactions'])
+    e.add_argument('--csv', default=None, type=_existing_dir,
+                   help='instead of a scenario: a folder of labelled CSV demonstrations (with '
+                        '--labels, --observed, --controlled)')
+    e.add_argument('--labels', default=None,
+                   help='with --csv: a JSON file mapping each CSV file (name or stem) to its label')
+    _add_csv_columns(e)
     e.add_argument('--out', required=True, type=_out_dir)
     e.add_argument('--seed', type=int, default=0)
     e.add_argument('--quick', action='store_true', help='fewer components/folds (for smoke runs)')
@@ -261,21 +303,32 @@ def build_parser():
     e.set_defaults(func=_evaluate)
 
     d = sub.add_parser('demo', help='closed loop: bags -> observer -> estimator -> MuJoCo arm')
+    d.add_argument('--scenario', choices=['box_assembly', 'interactions'],
+                   default='box_assembly',
+                   help="box_assembly: generated human-robot demonstrations; interactions: "
+                        "NuiSI's two people, the arm in person 2's place, person 1's held-out "
+                        "recordings replayed (config/interactions.yaml)")
     _add_robot(d)
     d.add_argument('--data', default=None,
                    help='folder of demonstration bags, generated if missing (default: '
-                        'out/box_assembly_bags for the iiwa14, out/<robot>/box_assembly_bags '
-                        'for another robot)')
+                        'out/box_assembly_bags or out/interactions/bags for the iiwa14, '
+                        'out/<robot>/... for another robot)')
     d.add_argument('--out', default=None, type=_out_dir,
-                   help='model, plots and report go here (default: out/demo, out/<robot>/demo '
-                        'for another robot)')
+                   help='model, plots and report go here (default: out/demo or '
+                        'out/interactions/demo, out/<robot>/... for another robot)')
+    d.add_argument('--components', type=_bounded(int, 1, name='a whole number'), default=None,
+                   help='number of components (default: chosen by leave-one-out)')
     d.add_argument('--json', default=None, type=_new_file,
                    help='also write the report as JSON here')
     d.add_argument('--render', default=None, type=_out_dir,
                    help='write videos and contact sheets here')
     d.add_argument('--held-out', type=_bounded(int, 1, name='a whole number'), default=3,
-                   help='interactions replayed per pattern')
+                   help='box_assembly: interactions replayed per pattern (interactions: the '
+                        'upstream test split)')
     d.add_argument('--seed', type=int, default=0)
+    d.add_argument('--command-delay', type=_bounded(float, 0.0, 60.0), default=None,
+                   metavar='S', help='hold every command from the estimator S seconds of '
+                                     'simulated time before the arm gets it (a slow link)')
     d.set_defaults(func=_demo)
 
     m = sub.add_parser('params', help="a node's parameters as the README's Markdown table")
@@ -297,6 +350,7 @@ def build_parser():
 
 
 def main(argv=None):
+    set_process_defaults()       # before the commands import numpy and numba
     logging.basicConfig(level=logging.INFO, format='%(levelname)s %(name)s: %(message)s')
     args = build_parser().parse_args(argv)
     try:

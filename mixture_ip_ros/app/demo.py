@@ -1,11 +1,13 @@
-"""`mixture-ip demo`: the closed loop end to end.
+"""`mixture-ip demo`: the closed loop end to end (``--scenario interactions``: app.interactions).
 
 Generate the box-assembly demonstrations as bags for the chosen robot (if the folder is missing),
 hold out some interactions per pattern, train on the rest (K by leave-one-out), then replay the
 held-out human demonstrations through the real nodes (bag_player -> observer -> estimator -> sim)
 on simulated time, and report per interaction the true and chosen pattern, when the robot
-committed, how far its hand ended from the target, how closely it tracked its commands, and the
-estimator's latency.
+committed, how far its hand ended from the target, how closely it tracked its commands, what
+the simulated controller did with them (refused, re-timed when late, points beyond the limits),
+and the estimator's latency. ``--command-delay S`` holds every command S s of simulated time on
+its way to the arm.
 """
 
 import json
@@ -20,8 +22,7 @@ import numpy as np
 from mixture_ip_ros.io.bags import read_bag
 from mixture_ip_ros.io.dataset import load_demonstration
 from mixture_ip_ros.io.files import write_text_atomic
-from mixture_ip_ros.scenarios.generated import (read_labels, read_scenario_robot,
-                                                write_scenario_bags)
+from mixture_ip_ros.scenarios.folders import read_labels, read_scenario_robot, write_scenario_bags
 from mixture_ip_ros.robot.description import DEFAULT_ROBOT, load_description
 from mixture_ip_ros.robot.kinematics import RobotKinematics
 from mixture_ip_ros.app.training import text_progress, train_to_file
@@ -81,8 +82,11 @@ def prepare(data_dir: Path, out_dir: Path, held_out: int, seed: int, n_component
 
 
 def run_demo(args):
-    os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
-    from mixture_ip_ros.app.closed_loop import ClosedLoop   # rclpy only once the data is ready
+    if getattr(args, 'scenario', 'box_assembly') == 'interactions':
+        from mixture_ip_ros.app.interactions import run
+        return run(args)
+    # rclpy only once the data is ready
+    from mixture_ip_ros.app.closed_loop import ClosedLoop, points_beyond_limits
 
     robot = load_description(args.robot)
     default_data, default_out = default_paths(robot)
@@ -90,14 +94,15 @@ def run_demo(args):
     out_dir = Path(args.out) if args.out else default_out
     out_dir.mkdir(parents=True, exist_ok=True)
     labels, held, model_path, info = prepare(data_dir, out_dir, args.held_out, args.seed,
-                                             robot=robot)
+                                             n_components=args.components, robot=robot)
     print(f"{robot.name}: trained on {info['n_demonstrations']} demonstrations: "
           f"K = {info['n_components']}"
           + (f" (leave-one-out RMS by K: {np.round(info['loo_rms_mean'], 4).tolist()})"
              if 'loo_rms_mean' in info else ''))
     kin = RobotKinematics(robot)
     loop = ClosedLoop(model_path, robot=robot,
-                      domain_id=int(os.environ.get('ROS_DOMAIN_ID', 42)))
+                      domain_id=int(os.environ.get('ROS_DOMAIN_ID', 42)),
+                      command_delay=args.command_delay)
     records = []
     try:
         for name in held:
@@ -105,6 +110,7 @@ def run_demo(args):
             target, wrist_end = demonstrated_target(data_dir / name, kin)
             rec = loop.run_interaction(data_dir / name, true_pattern=labels[name], target=target)
             rec.extra['wrist_end'] = wrist_end
+            rec.extra['points_beyond_limits'] = points_beyond_limits(rec.extra['commands'], kin)
             records.append(rec)
             print(_line(rec), flush=True)
         latency = {'update_us_mean': loop.estimator.latency.mean_us,
@@ -115,6 +121,7 @@ def run_demo(args):
         loop.close()
     report = make_report(records, info, latency)
     report['robot'] = robot.name
+    report['command_delay'] = args.command_delay
     print(json.dumps({k: v for k, v in report.items() if k != 'interactions'}, indent=1))
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
@@ -145,9 +152,13 @@ def _line(rec):
     commit = '-' if rec.commit_fraction is None else f'{rec.commit_fraction:.2f}'
     rms, _ = tracking_mrad(rec)
     track = '-' if rms is None else f'{rms:.3f}'
+    late = rec.extra.get('sim_retimed', 0)
+    refused = rec.extra.get('sim_rejections', 0)
     return (f'{rec.name:>16s}: true {rec.true_pattern:<12s} chosen {str(rec.chosen_pattern):<12s}'
             f' committed at {commit} of the motion; hand {he:5.1f} cm from target, '
-            f'{to_wrist:5.1f} cm from the wrist; tracking RMS {track} mrad')
+            f'{to_wrist:5.1f} cm from the wrist; tracking RMS {track} mrad'
+            + (f'; {late} commands late (re-timed)' if late else '')
+            + (f'; {refused} refused: {rec.extra["last_rejection"]}' if refused else ''))
 
 
 def make_report(records, info, latency):
@@ -160,7 +171,14 @@ def make_report(records, info, latency):
                      'hand_to_wrist_cm': float(100 * np.linalg.norm(
                          r.flange[-1] - r.extra['wrist_end'])) if 'wrist_end' in r.extra else None,
                      'tracking_rms_mrad': rms, 'tracking_max_mrad': worst,
-                     'non_finite_commands': r.extra.get('non_finite_commands', 0)})
+                     'non_finite_commands': r.extra.get('non_finite_commands', 0),
+                     'commands': len(r.extra.get('commands', ())),
+                     'commands_retimed': r.extra.get('sim_retimed'),
+                     'last_retime_delay_s': r.extra.get('last_retime_delay'),
+                     'commands_refused': r.extra.get('sim_rejections'),
+                     'last_refusal': r.extra.get('last_rejection'),
+                     'final_plan_received': r.extra.get('final_plan_received'),
+                     'points_beyond_limits': r.extra.get('points_beyond_limits')})
     correct = [r['true_pattern'] == r['chosen_pattern'] for r in rows]
     tracked = [r['tracking_rms_mrad'] for r in rows if r['tracking_rms_mrad'] is not None]
     return {'interactions': rows,
@@ -176,7 +194,8 @@ def make_report(records, info, latency):
 
 def render_all(records, render_dir: Path):
     try:
-        from mixture_ip_ros.viz.render import render_interaction, rendering_available
+        from mixture_ip_ros.viz.animation import render_interaction
+        from mixture_ip_ros.viz.offscreen import rendering_available
     except ImportError as e:
         print(f'rendering unavailable ({e}); no video', file=sys.stderr)
         return

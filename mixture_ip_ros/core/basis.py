@@ -35,6 +35,16 @@ class GaussianBasis:
         return (isinstance(other, GaussianBasis) and self.n_basis == other.n_basis
                 and self.width == other.width)
 
+    def gram(self) -> np.ndarray:
+        """M = integral over z in [0, 1] of psi(z) psi(z)^T (n_basis, n_basis): the metric of
+        paths in weight space, (w1 - w2)^T M (w1 - w2) the mean squared distance between the
+        paths psi^T w1 and psi^T w2 over the phase. Gauss-Legendre quadrature, exact to
+        rounding for these smooth functions."""
+        nodes, weights = np.polynomial.legendre.leggauss(8 * self.n_basis + 32)
+        z = 0.5 * (nodes + 1.0)
+        psi = self(z)
+        return (psi * (0.5 * weights)[:, None]).T @ psi
+
     def __call__(self, z) -> np.ndarray:
         """psi(z) of eq. 15: shape (len(z), n_basis); rows sum to one."""
         return self.evaluate(z, order=0)[0]

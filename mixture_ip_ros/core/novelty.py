@@ -132,7 +132,7 @@ def calibrate(demos, fit, *, n_alpha: int = 50, min_interval: float = 0.05, n_fo
               window_size: int = WINDOW, random_state=0) -> NoveltyThresholds:
     """Thresholds from ``demos`` held out in ``n_folds`` folds; ``fit(train)`` returns a fitted
     MixtureIProMP (the same configuration as the model they will guard)."""
-    from mixture_ip_ros.core.mixture import cv_folds
+    from mixture_ip_ros.core.selection import cv_folds
     demos = list(demos)
     if len(demos) < 2:
         raise ValueError('novelty calibration needs at least 2 demonstrations')

@@ -98,8 +98,10 @@ class OnlineEstimator:
                                [self._hyp0])
         self._mu0 = to_lanes(np.repeat(model.means_[:, :do], M, 0)[self._hyp0])
         # Observation noise per column: tied (P,) or per component (K, P).
-        noise = np.broadcast_to(np.asarray(model.observed_noise_var_, dtype=float),
-                                (K, model.n_observed_))
+        # Samples at least min_interval apart, each worth what its residual's correlation
+        # leaves of it (core.noise).
+        noise = np.broadcast_to(np.asarray(model.observed_noise_var_at(self.min_interval),
+                                           dtype=float), (K, model.n_observed_))
         self._noise0 = to_lanes(np.repeat(noise, M, 0)[self._hyp0])
         # Regression of controlled on observed weights per component (exact conditioning).
         self._gain, self._cond_cov = [], []
@@ -306,8 +308,11 @@ class OnlineEstimator:
             return k, int(np.argmax(self.joint_posterior()[k]))
         return k, int(np.argmin(np.abs(self.alphas - alpha)))
 
-    def _controlled_mean(self, k, mu_o):
-        """Mean of the controlled agent's weights given the observed ones' mean (via B_k)."""
+    def controlled_mean(self, k, mu_o):
+        """Mean of the controlled agent's weights (Q*N,) under component ``k`` given a mean
+        ``mu_o`` (P*N,) of the observed agent's (eq. 13's conditional mean, through the
+        regression B_k of controlled on observed weights), for instance that of
+        :meth:`posterior_at` at any alpha."""
         prior_mean = self.model.means_[k]
         do = mu_o.shape[0]
         return prior_mean[do:] + self._gain[k] @ (mu_o - prior_mean[:do])
@@ -338,7 +343,7 @@ class OnlineEstimator:
                                   np.asarray(self._values))
         return weight_posterior(stats, model.means_[k][:do],
                                 linalg.cho_factor(model.covariances_[k][:do, :do], lower=True),
-                                model._observed_noise(k))
+                                model._observed_noise(k, self.min_interval))
 
     def refined_alpha(self, component=None) -> float:
         """Eq. 20 between grid values: the MAP alpha of ``component`` (k* if None), the vertex
@@ -408,7 +413,7 @@ class OnlineEstimator:
         k, m = self._hypothesis(component, alpha)
         a = float(self.alphas[m])
         mu_o, sig_o = self.observed_weights(k, m)
-        mean_c = self._controlled_mean(k, mu_o)
+        mean_c = self.controlled_mean(k, mu_o)
         cov_c = None
         if covariance:
             B = self._gain[k]
@@ -433,7 +438,7 @@ class OnlineEstimator:
         # Only what is asked for (the estimator node asks for one agent at a time).
         z_c = np.asarray(z_controlled, dtype=float)
         if z_c.size:
-            controlled = mean_trajectory(self._controlled_mean(k, mu_o).reshape(
+            controlled = mean_trajectory(self.controlled_mean(k, mu_o).reshape(
                 -1, self.n_basis), z_c, basis.centers, basis.width, a)
         else:
             controlled = tuple(np.zeros((0, self.model.n_controlled_)) for _ in range(3))

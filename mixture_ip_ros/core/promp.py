@@ -29,6 +29,10 @@ class ObservationStats:
     yy: np.ndarray
     m: np.ndarray
 
+    def take(self, idx) -> 'ObservationStats':
+        """The statistics of trajectories ``idx`` of stacked ones (:func:`stack_stats`)."""
+        return ObservationStats(self.G[idx], self.b[idx], self.yy[idx], self.m[idx])
+
 
 def observation_stats(basis: GaussianBasis, z, Y) -> ObservationStats:
     """Statistics of samples Y (T, D) at phases z (T,); NaN entries are missing."""

@@ -253,6 +253,9 @@ class OnlinePlanner:
         t_end = (int(stamp_ns) - self._onset_ns) * 1e-9
         if np.isfinite(t_end) and t_end > self.t_now:
             self._t_latest = t_end
+        # The end is dated back to when the hand came to rest, at least the observer's
+        # end_hold before it is confirmed: the clock check judges the latest observation.
+        self._fresh_ns = max(int(stamp_ns), self._trigger_ns)
         self._trigger_ns = int(stamp_ns)     # the end is dated back: often before the latest
         step = self.replan(now_ns, final=True, t_end=t_end)
         self._close('end', t_end)
@@ -371,7 +374,8 @@ class OnlinePlanner:
                           catch_up_velocity=self.catch_up_velocity,
                           final_position=self._y_latest if final else None)
         trigger = self._trigger_ns
-        sendable, problem = self._checked(plan, t_plan, trigger, now_ns)
+        sendable, problem = self._checked(plan, t_plan, self._fresh_ns if final else trigger,
+                                          now_ns)
         if problem is not None:
             return Step(summary, plan, send=False, trigger_ns=trigger, problem=problem)
         plan = sendable
@@ -408,9 +412,10 @@ class OnlinePlanner:
         return Step(summary, plan, send=True, trigger_ns=trigger, committed_now=committed_now,
                     switched_from=switched_from)
 
-    def _checked(self, plan, t_plan, trigger_ns, now_ns):
+    def _checked(self, plan, t_plan, fresh_ns, now_ns):
         """(the plan to send, None) or (None, why not), each refusal counted by kind. A plan
-        that only needs slowing down to respect the joint limits is slowed down."""
+        that only needs slowing down to respect the joint limits is slowed down; one whose
+        freshest evidence (``fresh_ns``) is stamped too far from the clock is not sent."""
         kind, why = 'invalid', check_plan(plan)
         if why is None and self.limits is not None:
             kind = 'beyond_limits'
@@ -420,9 +425,9 @@ class OnlinePlanner:
                 plan = scaled
         offset = self._settings.max_clock_offset
         if why is None and offset > 0 and now_ns is not None and \
-                abs(trigger_ns - int(now_ns)) > round(offset * 1e9):
+                abs(fresh_ns - int(now_ns)) > round(offset * 1e9):
             kind = 'off_clock'
-            why = (f'the observations are stamped {(trigger_ns - int(now_ns)) * 1e-9:+.3g} s '
+            why = (f'the observations are stamped {(fresh_ns - int(now_ns)) * 1e-9:+.3g} s '
                    "from this node's clock")
         if why is None:
             return plan, None

@@ -25,6 +25,9 @@ PHASE_EPS = 1e-6
 # A plan would have to be slowed down more than this to respect the joint speed limits: it is
 # not the movement that was learned any more, and is refused.
 MAX_TIME_SCALE = 4.0
+# A plan slowed down to its limits is slowed this much more (relative): times sent as whole
+# nanoseconds and rounded divisions would put one exactly at a limit just beyond it.
+SLOWDOWN_MARGIN = 1e-6
 
 
 # The node plans in callbacks that follow a wait, where each distinct numpy call costs tens of
@@ -214,11 +217,13 @@ def _plan_problem(times, positions, velocities, accelerations):
 
 
 @numba.njit(numba.types.Tuple((numba.int64, numba.float64, numba.float64, numba.float64))(
-    _F2, _F2, _F2, _F1, _F1, _F1, _F1), cache=True)
-def _limit_ratios(positions, velocities, accelerations, lower, upper, velocity, acceleration):
+    _F1, _F2, _F2, _F2, _F1, _F1, _F1, _F1), cache=True)
+def _limit_ratios(times, positions, velocities, accelerations, lower, upper, velocity,
+                  acceleration):
     """(the first joint with a position beyond its limits, or -1; its lowest position if one is
-    below the lower limit, else its highest; max |v| / v_limit; max |a| / a_limit), each
-    ratio a division then a maximum, as numpy's."""
+    below the lower limit, else its highest; the largest speed over its limit, of a point's
+    velocity or the mean between two points, |v| / v_limit; max |a| / a_limit), each ratio a
+    division then a maximum, as numpy's."""
     n, q = positions.shape
     for j in range(q):
         low = high = False
@@ -236,6 +241,10 @@ def _limit_ratios(positions, velocities, accelerations, lower, upper, velocity, 
         for j in range(q):
             v = max(v, abs(velocities[i, j]) / velocity[j])
             a = max(a, abs(accelerations[i, j]) / acceleration[j])
+    for i in range(n - 1):
+        for j in range(q):
+            v = max(v, abs(positions[i + 1, j] - positions[i, j]) / (times[i + 1] - times[i])
+                    / velocity[j])
     return -1, 0.0, v, a
 
 
@@ -274,21 +283,25 @@ def within_limits(plan: Plan, limits: JointLimits, t_plan: float) -> Tuple[Optio
                                                                          Optional[str], float]:
     """The plan made to respect ``limits``: (plan, None, time scale), or (None, why, scale).
 
-    Positions beyond a limit cannot be fixed by timing: the plan is refused. Velocities and
-    accelerations beyond their limits are brought within them by slowing the whole plan down
-    about ``t_plan`` (times stretched by s, velocities divided by s, accelerations by s^2);
-    a plan that would need s > MAX_TIME_SCALE is refused.
+    Positions beyond a limit cannot be fixed by timing: the plan is refused. Velocities (of
+    the points, and the mean speeds between them, which the controller checks too) and
+    accelerations beyond their limits are brought just within them by slowing the whole plan
+    down about ``t_plan`` (times stretched by s, velocities divided by s, accelerations by
+    s^2); a plan that would need s > MAX_TIME_SCALE is refused.
     """
     if plan.positions.shape[1] != limits.lower.shape[0]:
         raise ValueError(f'{plan.positions.shape[1]} joints in the plan, '
                          f'{limits.lower.shape[0]} in the limits')
-    j, worst, v, a = _limit_ratios(plan.positions, plan.velocities, plan.accelerations,
-                                   limits.lower, limits.upper, limits.velocity,
-                                   limits.acceleration)
+    j, worst, v, a = _limit_ratios(plan.times, plan.positions, plan.velocities,
+                                   plan.accelerations, limits.lower, limits.upper,
+                                   limits.velocity, limits.acceleration)
     if j >= 0:
         return None, (f'joint {j + 1} at {worst:.3f} rad, beyond its limits '
                       f'[{limits.lower[j]:.3f}, {limits.upper[j]:.3f}]'), 1.0
     scale = max(1.0, v, math.sqrt(a))
+    if scale > 1.0:
+        # Exactly at a limit is not within it once the times are whole nanoseconds.
+        scale *= 1.0 + SLOWDOWN_MARGIN
     if scale > MAX_TIME_SCALE:
         return None, (f'would have to be {scale:.1f} times slower to respect the joint speed '
                       f'and acceleration limits'), scale

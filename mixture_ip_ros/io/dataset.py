@@ -1,8 +1,10 @@
 """A dataset is a folder of demonstration bags; each bag becomes one Demonstration.
 
 Loading a bag: read both streams (``bags.read_bag``), move the wrist into the robot base frame,
-find the human's movement onset and end (``core.segmentation.segment_motion``) and resample both
-streams onto one uniform time base ``t = 0, dt, 2 dt, ...`` from onset to end.
+drop the samples the observer drops as no person's wrist (``estimation.pose_check``: a tracker
+that jumps away and back), find the human's movement onset and end
+(``core.segmentation.segment_motion``) and resample both streams onto one uniform time base
+``t = 0, dt, 2 dt, ...`` from onset to end. Training then sees what the observer passes on.
 
 - Wrist: linear interpolation between the two recorded samples around a resampled time, but only if
   they are at most ``2 * gap_tolerance`` periods apart (period = max(dt, wrist sample period)), so the
@@ -27,6 +29,7 @@ import numpy as np
 from mixture_ip_ros.core.demonstration import Demonstration, Layout
 from mixture_ip_ros.core.frames import FrameTransform
 from mixture_ip_ros.core.segmentation import segment_motion
+from mixture_ip_ros.estimation.pose_check import accepted_online
 from mixture_ip_ros.robot.description import JOINT_NAMES
 from mixture_ip_ros.io.bags import (JOINT_TOPIC, WRIST_TOPIC, BagError,
                                       RawRecording, read_bag)
@@ -83,6 +86,28 @@ def resample_wrist(t_src: np.ndarray, xyz_src: np.ndarray, t_query: np.ndarray,
     return out
 
 
+def segment_recording(rec: RawRecording, *, transform=None, segmentation: Optional[dict] = None,
+                      source: str = 'recording'):
+    """The wrist stream in the robot base frame (N, 3), NaN where no sample is or the observer
+    would drop it, and the movement's onset and end times (s, the recording's time base), found
+    as the observer finds them. Raises BagError."""
+    tf = FrameTransform.from_any(transform)
+    xyz = tf.apply_array(rec.wrist_xyz)
+    valid = ~np.isnan(xyz).any(axis=1)
+    valid[valid] = accepted_online(rec.wrist_t[valid], xyz[valid])
+    xyz[~valid] = np.nan
+    if valid.sum() < 2:
+        raise BagError(source, 'fewer than 2 valid wrist samples')
+    try:
+        t_onset, t_end = segment_motion(rec.wrist_t, xyz, **(segmentation or {}))
+    except ValueError as exc:
+        raise BagError(source, f'no movement onset/end found in the wrist stream: {exc}') from exc
+    t_onset, t_end = float(t_onset), float(t_end)
+    if not (np.isfinite(t_onset) and np.isfinite(t_end) and t_end > t_onset):
+        raise BagError(source, f'segmentation gave onset {t_onset} s and end {t_end} s')
+    return xyz, t_onset, t_end
+
+
 def recording_to_demonstration(rec: RawRecording, *, transform=None, dt: float = 0.01,
                                gap_tolerance: float = 1.25, max_joint_gap: float = 0.1,
                                segmentation: Optional[dict] = None, wrist_frame: Optional[str] = None,
@@ -97,18 +122,9 @@ def recording_to_demonstration(rec: RawRecording, *, transform=None, dt: float =
         raise ValueError(f'gap_tolerance must be >= 0.5 (in sample periods), got {gap_tolerance!r}')
     if wrist_frame is not None and rec.wrist_frame != wrist_frame:
         raise BagError(source, f'wrist poses are in frame {rec.wrist_frame!r}, expected {wrist_frame!r}')
-    tf = FrameTransform.from_any(transform)
-    xyz = tf.apply_array(rec.wrist_xyz)
+    xyz, t_onset, t_end = segment_recording(rec, transform=transform,
+                                            segmentation=segmentation, source=source)
     valid = ~np.isnan(xyz).any(axis=1)
-    if valid.sum() < 2:
-        raise BagError(source, 'fewer than 2 valid wrist samples')
-    try:
-        t_onset, t_end = segment_motion(rec.wrist_t, xyz, **(segmentation or {}))
-    except ValueError as exc:
-        raise BagError(source, f'no movement onset/end found in the wrist stream: {exc}') from exc
-    t_onset, t_end = float(t_onset), float(t_end)
-    if not (np.isfinite(t_onset) and np.isfinite(t_end) and t_end > t_onset):
-        raise BagError(source, f'segmentation gave onset {t_onset} s and end {t_end} s')
     n = int(np.floor((t_end - t_onset) / dt + 1e-9)) + 1
     if n < 2:
         raise BagError(source, f'movement of {t_end - t_onset:.3f} s is shorter than dt = {dt} s')

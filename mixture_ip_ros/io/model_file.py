@@ -24,13 +24,13 @@ from mixture_ip_ros.core.novelty import NoveltyThresholds
 from mixture_ip_ros.io.files import write_atomic
 
 FORMAT = 'mixture_ip_ros/mixture-iprompt'
-FORMAT_VERSION = 2
-_READABLE_VERSIONS = (1, 2)
+FORMAT_VERSION = 3
+_READABLE_VERSIONS = (1, 2, 3)
 _PARAMS = ('n_components', 'n_basis', 'method', 'ridge', 'prior_strength', 'prior_scale',
            'max_iter', 'tol', 'n_init', 'random_state', 'observation_noise', 'noise',
            'noise_var')
 _ARRAYS = ('weights', 'means', 'covariances', 'noise_var', 'alpha_mean', 'alpha_std',
-           'prior_cov')
+           'prior_cov', 'noise_time')
 
 
 class ModelFileError(ValueError):
@@ -74,6 +74,7 @@ def save_model(path, model: MixtureIProMP, *, layout: Layout = None, observed_na
                     else [_jsonable_param(c) for c in model.classes_]),
         'component_labels': list(component_labels) if component_labels is not None else None,
         'log_likelihood': [float(v) for v in model.log_likelihood_],
+        'sample_period': float(model.sample_period_),
         'novelty': None if (novelty := getattr(model, 'novelty_', None)) is None else {
             'prefix': [float(v) for v in novelty.prefix], 'window': float(novelty.window),
             'window_size': novelty.window_size, 'min_interval': novelty.min_interval},
@@ -119,6 +120,10 @@ def load_model(path, *, observed_names=None, controlled_names=None):
     if meta['format_version'] == 1:       # wrist (m) + robot joints (rad) only
         meta.setdefault('observed_units', ['m'] * len(meta.get('observed_names', [])))
         meta.setdefault('controlled_units', ['rad'] * len(meta.get('controlled_names', [])))
+    if meta['format_version'] < 3:        # before residual correlations: white noise
+        data['noise_time'] = np.zeros(int(meta.get('n_observed', 0))
+                                      + int(meta.get('n_controlled', 0)))
+        meta.setdefault('sample_period', 0.0)
     missing = [a for a in _ARRAYS if a not in data]
     if missing:
         fail(f'missing arrays {missing}')
@@ -136,7 +141,7 @@ def load_model(path, *, observed_names=None, controlled_names=None):
     noise_shape = (K, P + Q) if params.get('noise') == 'per_component' else (P + Q,)
     expected = {'weights': (K,), 'means': (K, d), 'covariances': (K, d, d),
                 'noise_var': noise_shape, 'alpha_mean': (K,), 'alpha_std': (K,),
-                'prior_cov': (d, d)}
+                'prior_cov': (d, d), 'noise_time': (P + Q,)}
     for name, shape in expected.items():
         if data[name].shape != shape:
             fail(f'{name} has shape {data[name].shape}, expected {shape}')
@@ -146,6 +151,10 @@ def load_model(path, *, observed_names=None, controlled_names=None):
     if np.any(data['alpha_mean'] <= 0) or np.any(data['alpha_std'] <= 0) or np.any(
             data['noise_var'] <= 0):
         fail('phase priors and noise variances must be positive')
+    period = meta.get('sample_period')
+    if (not isinstance(period, (int, float)) or not np.isfinite(period) or period < 0
+            or np.any(data['noise_time'] < 0)):
+        fail('the sample period and residual correlation times must be numbers >= 0')
     for k, C in enumerate(data['covariances']):
         if not np.allclose(C, C.T, rtol=0, atol=1e-10 * np.abs(C).max()):
             fail(f'covariance {k} is not symmetric')
@@ -166,6 +175,7 @@ def load_model(path, *, observed_names=None, controlled_names=None):
     for name in _ARRAYS:
         setattr(model, name + '_', data[name])
     model.log_likelihood_ = meta.get('log_likelihood', [])
+    model.sample_period_ = float(period)
     model.classes_ = meta.get('classes')
     try:
         model.novelty_ = novelty_thresholds(meta)

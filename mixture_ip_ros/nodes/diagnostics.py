@@ -17,13 +17,13 @@ def diagnostic_array(stamp, name: str, level: bytes, message: str, values: dict)
 
 
 class PublishesDiagnostics:
-    """The diagnostics timer's callback, for a node with a ``_diag_pub`` publisher, a
+    """The diagnostics timer's callback, for a node with a ``diagnostics_pub`` publisher, a
     ``diagnostics_msg()`` and a ``log_throttle_sec`` parameter."""
 
     def publish_diagnostics(self) -> None:
         # A report that cannot be built or sent is logged, never raised: the node's work goes on.
         try:
-            self._diag_pub.publish(self.diagnostics_msg())
+            self.diagnostics_pub.publish(self.diagnostics_msg())
         except Exception as exc:
             self.get_logger().error(f'diagnostics failed: {exc!r}',
                                     throttle_duration_sec=self.params.log_throttle_sec)

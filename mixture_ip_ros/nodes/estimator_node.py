@@ -73,7 +73,9 @@ class EstimatorParameters:
     event_topic: str = param('/observer/event', 'std_msgs/Header, frame_id onset | end | gap')
     joint_state_topic: str = param('/joint_states', "the robot's joints, to time catching up "
                                                     'with a plan')
-    trajectory_topic: str = param('/iiwa/joint_trajectory', 'trajectory_msgs/JointTrajectory')
+    trajectory_topic: str = param('joint_trajectory', 'trajectory_msgs/JointTrajectory to '
+                                                      "the robot's controller (relative: "
+                                                      "in the node's namespace)")
     path_topic: str = param('/estimator/predicted_wrist', 'nav_msgs/Path of the whole '
                                                           'predicted wrist movement')
     posterior_topic: str = param('/estimator/posterior', 'std_msgs/Float64MultiArray [p_k.., '
@@ -213,20 +215,19 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
         self._trajectory_encoder = JointTrajectoryEncoder(p.joint_names)
         self._path_encoder = PathEncoder(p.observed_frame)
         out = qos.reliable(p.output_queue_depth)
-        self._traj_pub = self.create_lifecycle_publisher(JointTrajectory, p.trajectory_topic,
-                                                         out)
-        self._path_pub = self.create_lifecycle_publisher(Path, p.path_topic, out)
-        self._post_pub = self.create_lifecycle_publisher(Float64MultiArray, p.posterior_topic,
-                                                         out)
-        self._marker_pub = self.create_lifecycle_publisher(MarkerArray, p.marker_topic, out)
-        self._diag_pub = self.create_lifecycle_publisher(DiagnosticArray, '/diagnostics', out)
+        publisher = self.create_lifecycle_publisher
+        self.trajectory_pub = publisher(JointTrajectory, p.trajectory_topic, out)
+        self.path_pub = publisher(Path, p.path_topic, out)
+        self.posterior_pub = publisher(Float64MultiArray, p.posterior_topic, out)
+        self.marker_pub = publisher(MarkerArray, p.marker_topic, out)
+        self.diagnostics_pub = publisher(DiagnosticArray, '/diagnostics', out)
         self._diag_seen = (0, 0)
         labels = meta.get('component_labels')
         self.get_logger().info(
             f'model {p.model_path}: {model.n_components} components'
             f"{' (' + ', '.join(labels) + ')' if labels else ''}, {model.n_basis} basis "
             f'functions; observing {p.observation_topic} in {p.observed_frame}, commanding '
-            f'{p.trajectory_topic}')
+            f'{self.trajectory_pub.topic_name}')
 
     def activate(self) -> None:
         p = self.params
@@ -255,14 +256,15 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
         if self.planner is None:
             return
         if self._sent_any:
-            self._traj_pub.publish(JointTrajectory(joint_names=list(self.params.joint_names)))
+            self.trajectory_pub.publish(JointTrajectory(joint_names=list(self.params.joint_names)))
             self._sent_any = False
         if self.planner.active:
             self.planner.deactivate()
             self.get_logger().warning('deactivated during an interaction: the robot holds')
 
     def cleanup(self) -> None:
-        for name in ('_traj_pub', '_path_pub', '_post_pub', '_marker_pub', '_diag_pub'):
+        for name in ('trajectory_pub', 'path_pub', 'posterior_pub', 'marker_pub',
+                     'diagnostics_pub'):
             pub = getattr(self, name, None)
             if pub is not None:
                 self.destroy_lifecycle_publisher(pub)
@@ -394,7 +396,7 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
         if step is None:
             return
         if step.hold:
-            self._traj_pub.publish(JointTrajectory(joint_names=list(self.params.joint_names)))
+            self.trajectory_pub.publish(JointTrajectory(joint_names=list(self.params.joint_names)))
             self.get_logger().warning(f'the movement is none the model knows any more '
                                       f'({step.unexplained}): the robot holds')
         elif step.unexplained is not None:
@@ -404,12 +406,12 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
         plan = step.plan if step.problem is None else None
         if plan is not None and step.send:
             trigger = step.trigger_ns
-            self._traj_pub.publish(self._trajectory_encoder.encode(
+            self.trajectory_pub.publish(self._trajectory_encoder.encode(
                 trigger, onset_ns + np.round(plan.times * 1e9).astype(np.int64) - trigger,
                 plan.positions, plan.velocities, plan.accelerations))
             self._sent_any = True
             self.plan_latency.add(time.perf_counter() - t0)
-        self._post_pub.publish(self._posterior_encoder.encode(step.summary.as_array()))
+        self.posterior_pub.publish(self._posterior_encoder.encode(step.summary.as_array()))
         if plan is None:
             self.get_logger().error(f'plan not published: {step.problem}',
                                     throttle_duration_sec=self.params.log_throttle_sec)
@@ -435,13 +437,14 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
             self.get_logger().error('predicted wrist path not published: non-finite',
                                     throttle_duration_sec=self.params.log_throttle_sec)
             return
-        self._path_pub.publish(self._path_encoder.encode(
+        self.path_pub.publish(self._path_encoder.encode(
             stamp_ns, onset_ns + np.round(times * 1e9).astype(np.int64), positions))
 
     def _publish_markers(self, step, onset_ns) -> None:
         rate = self.params.marker_rate_hz
         now = self._now_ns()
-        if rate <= 0 or now < self._next_markers_ns or self._marker_pub.get_subscription_count() == 0:
+        if (rate <= 0 or now < self._next_markers_ns
+                or self.marker_pub.get_subscription_count() == 0):
             return
         self._next_markers_ns = now + round(1e9 / rate)
         paths = [(k, step.summary.probabilities[k], positions)
@@ -449,7 +452,7 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
         hand = None
         if self._hand is not None and step.send:
             hand = self._hand.fk_positions(step.plan.positions)
-        self._marker_pub.publish(prediction_markers(
+        self.marker_pub.publish(prediction_markers(
             self.params.observed_frame, self.get_clock().now().to_msg(), paths, hand,
             [self._label(k).strip(' ()') or f'component {k}' for k, _, _ in paths]))
 

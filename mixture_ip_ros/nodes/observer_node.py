@@ -173,11 +173,12 @@ class ObserverNode(PublishesDiagnostics, ManagedNode):
             restart_after_backwards=p.restart_after_backwards,
             max_clock_offset=p.max_clock_offset, limits=limits)
         out = qos.reliable(p.output_queue_depth)
-        self._obs_pub = self.create_lifecycle_publisher(PointStamped, p.observation_topic, out)
+        publisher = self.create_lifecycle_publisher
+        self.observation_pub = publisher(PointStamped, p.observation_topic, out)
         self._point = PointStamped()
         self._point.header.frame_id = p.base_frame
-        self._event_pub = self.create_lifecycle_publisher(Header, p.event_topic, out)
-        self._diag_pub = self.create_lifecycle_publisher(DiagnosticArray, '/diagnostics', out)
+        self.event_pub = publisher(Header, p.event_topic, out)
+        self.diagnostics_pub = publisher(DiagnosticArray, '/diagnostics', out)
         self._diag_seen = 0
         self.get_logger().info(
             f"observing {p.wrist_topic} (frame {p.expected_frame or 'any'}) -> "
@@ -198,7 +199,7 @@ class ObserverNode(PublishesDiagnostics, ManagedNode):
         self._sub, self._timers = None, []
 
     def cleanup(self) -> None:
-        for name in ('_obs_pub', '_event_pub', '_diag_pub'):
+        for name in ('observation_pub', 'event_pub', 'diagnostics_pub'):
             pub = getattr(self, name, None)
             if pub is not None:
                 self.destroy_lifecycle_publisher(pub)
@@ -247,7 +248,7 @@ class ObserverNode(PublishesDiagnostics, ManagedNode):
         point = self._point          # one message, filled per pose (publish serializes it)
         point.header.stamp = stamp
         point.point.x, point.point.y, point.point.z = out.point
-        self._obs_pub.publish(point)
+        self.observation_pub.publish(point)
         self._publish_events(out.events)
 
     def on_timer(self) -> None:
@@ -277,7 +278,7 @@ class ObserverNode(PublishesDiagnostics, ManagedNode):
     def _publish_events(self, events) -> None:
         for kind, stamp_ns in events:
             sec, nanosec = ns_to_parts(stamp_ns)
-            self._event_pub.publish(Header(frame_id=kind, stamp=Time(sec=sec, nanosec=nanosec)))
+            self.event_pub.publish(Header(frame_id=kind, stamp=Time(sec=sec, nanosec=nanosec)))
 
     def _log_drop(self, text: str) -> None:
         # A logger call is costly even when throttled: decide here first.

@@ -30,7 +30,7 @@ class RecorderParameters:
     observation_topic: str = param('/observer/wrist', "the observer's wrist observations")
     event_topic: str = param('/observer/event', "the observer's events")
     posterior_topic: str = param('/estimator/posterior', "the estimator's posterior summary")
-    trajectory_topic: str = param('/iiwa/joint_trajectory', 'the commands to the robot')
+    trajectory_topic: str = param('joint_trajectory', 'the commands to the robot')
 
 
 class InteractionRecorder(Node):

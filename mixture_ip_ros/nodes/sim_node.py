@@ -4,10 +4,15 @@ The arm is the parameter ``robot``: a shipped robot's name (config/robots/) or a
 description file; its description gives the defaults of initial_positions, the gains and
 base_frame.
 
-Subscribes  iiwa/joint_trajectory (trajectory_msgs/JointTrajectory, reliable) while active
-Publishes   joint_states (sensor_msgs/JointState), iiwa/flange_pose (geometry_msgs/PoseStamped)
+Subscribes  joint_trajectory (trajectory_msgs/JointTrajectory, reliable) while active
+Publishes   joint_states (sensor_msgs/JointState), flange_pose (geometry_msgs/PoseStamped)
             and, in simulated-time mode, /clock (rosgraph_msgs/Clock), all at publish_rate Hz of
             simulated time
+
+The robot's topics are relative names, so they name no particular arm: they resolve in the
+node's namespace (``--ros-args -r __ns:=/arm`` gives /arm/joint_trajectory) and are remapped
+like any ROS topic, for example to a ros2_control controller's names
+(``-r joint_trajectory:=/joint_trajectory_controller/joint_trajectory``).
 
 Lifecycle, as a robot with its joint_trajectory_controller: configure builds the scene and
 starts the physics (the arm holds its start posture, state and clock are published); activate
@@ -20,7 +25,10 @@ Time: with simulated_time true, ROS time is the simulation time, published on /c
 run with use_sim_time. Each timer callback advances periods_per_callback publish periods
 (publishing after each), as fast as possible (real_time_factor 0) or paced to real_time_factor.
 Trajectories are applied between callbacks, on a fixed grid of simulated time, so a run is
-deterministic given the callback at which each command arrived. With simulated_time false, the
+deterministic given the callback at which each command arrived. A command that arrives too late
+for the arm to reach its first point in time within the joint limits is re-timed, not refused: it
+starts later by the shortfall (logged, counted in retimed_count); one whose first point was due
+more than max_delay before it arrived is refused as stale. With simulated_time false, the
 simulation follows the wall clock and messages carry ROS time. The node's own timers always run
 on the steady clock, so it never waits on the clock it publishes.
 """
@@ -40,11 +48,15 @@ from mixture_ip_ros.nodes import qos
 from mixture_ip_ros.nodes.managed import ManagedNode, run_node
 from mixture_ip_ros.nodes.params import autostart_param, finite_list, param, positive
 from mixture_ip_ros.robot.description import DEFAULT_ROBOT, load_description, shipped_robots
-from mixture_ip_ros.robot.sim import RobotSimulation
+from mixture_ip_ros.robot.sim import DEFAULT_MAX_DELAY, RobotSimulation
 from mixture_ip_ros.robot.trajectory import DEFAULT_MAX_POINTS, TrajectoryPoint, too_many_points
 
 _DEFAULT = load_description(DEFAULT_ROBOT)
 PER_JOINT = ('initial_positions', 'natural_frequency', 'damping_ratio')
+# Relative: resolved in the node's namespace, remappable (--ros-args -r NAME:=...).
+COMMAND_TOPIC = 'joint_trajectory'
+JOINT_STATE_TOPIC = 'joint_states'
+POSE_TOPIC = 'flange_pose'
 
 
 @dataclass
@@ -58,9 +70,9 @@ class SimParameters:
                                        'simulation follows the wall clock')
     real_time_factor: float = param(1.0, 'simulated-time mode: simulated s per wall s; 0 = as '
                                          'fast as the machine allows', low=0.0, high=1000.0)
-    publish_rate: float = param(100.0, 'Hz of simulated time for joint_states, '
-                                       'iiwa/flange_pose and /clock (a whole number of 1 ms '
-                                       'control steps)', low=0.01, high=1000.0)
+    publish_rate: float = param(100.0, 'Hz of simulated time for joint_states, flange_pose '
+                                       'and /clock (a whole number of 1 ms control steps)',
+                                low=0.01, high=1000.0)
     periods_per_callback: int = param(1, 'simulated-time mode: publish periods per timer '
                                          'callback (more: less overhead, but in-process '
                                          'subscribers may miss JointStates)', low=1,
@@ -87,12 +99,19 @@ class SimParameters:
                                            'reference; false: from the measured state')
     pole: bool = param(False, 'the pole of the pole-pointing scenario in the scene')
     stands: bool = param(True, 'the plate and screw stands of box assembly in the scene')
-    base_frame: str = param(_DEFAULT.base_frame, 'frame of iiwa/flange_pose',
-                            from_robot=True)
+    table: bool = param(True, 'the table the arm stands on; false: the arm on its own in the '
+                              'open (the interactions scenario: a person\'s hand hangs below '
+                              'the table top)')
+    base_frame: str = param(_DEFAULT.base_frame, 'frame of flange_pose', from_robot=True)
     max_trajectory_points: int = param(DEFAULT_MAX_POINTS, 'longer trajectories are refused '
                                        'before they are read', low=2, high=10_000_000)
     max_catch_up: float = param(0.1, 'wall-clock mode: the largest backlog (s) caught up on '
                                      'in one go', low=0.0, high=10.0)
+    max_delay: float = param(DEFAULT_MAX_DELAY, 's; a trajectory whose first point was due '
+                             'more than this before it arrived is refused as stale (another '
+                             'clock, or held up); one that comes too late for the arm to follow '
+                             'starts later, when the arm can reach its first point within the '
+                             'joint limits', low=0.0, high=1e9)
 
 
 class SimNode(ManagedNode):
@@ -132,18 +151,19 @@ class SimNode(ManagedNode):
                                  f'joints, got {len(getattr(p, name))} values')
         self.sim = RobotSimulation(
             robot=description, q0=np.asarray(p.initial_positions), pole=p.pole, stands=p.stands,
+            table=p.table,
             natural_frequency=np.asarray(p.natural_frequency),
             damping_ratio=np.asarray(p.damping_ratio),
             controller_mass_scale=p.controller_mass_scale,
             allow_partial_joints_goal=p.allow_partial_joints_goal,
             allow_nonzero_velocity_at_trajectory_end=p.allow_nonzero_velocity_at_trajectory_end,
             open_loop_control=p.open_loop_control, logger=self.get_logger().warning,
-            max_trajectory_points=p.max_trajectory_points)
+            max_trajectory_points=p.max_trajectory_points, max_delay=p.max_delay)
         self.steps_per_publish = max(1, int(round(1.0 / (p.publish_rate * self.sim.dt))))
         self.publish_period = self.steps_per_publish * self.sim.dt
         state = qos.reliable(10)
-        self.joint_state_pub = self.create_publisher(JointState, 'joint_states', state)
-        self.flange_pub = self.create_publisher(PoseStamped, 'iiwa/flange_pose', state)
+        self.joint_state_pub = self.create_publisher(JointState, JOINT_STATE_TOPIC, state)
+        self.flange_pub = self.create_publisher(PoseStamped, POSE_TOPIC, state)
         # Reliable: a recorder's reliable subscription matches too (rclpy's TimeSource
         # subscribes best effort, which a reliable publisher also serves).
         self.clock_pub = (self.create_publisher(ClockMsg, '/clock', qos.reliable(1))
@@ -169,7 +189,7 @@ class SimNode(ManagedNode):
 
     def activate(self) -> None:
         self.trajectory_sub = self.create_subscription(
-            JointTrajectory, 'iiwa/joint_trajectory', self._on_trajectory, qos.reliable(10))
+            JointTrajectory, COMMAND_TOPIC, self._on_trajectory, qos.reliable(10))
 
     def deactivate(self) -> None:
         if self.trajectory_sub is not None:

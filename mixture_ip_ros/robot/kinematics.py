@@ -174,19 +174,65 @@ class RobotKinematics:
     # ------------------------------------------------------------------ inverse kinematics
     def ik(self, position, q0, rotation=None, orientation_weight: float = 0.3,
            max_iters: int = 100, tol: float = 1e-3, rotation_tol: float | None = None,
-           limit_margin: float = 0.02, restarts: int = 12) -> np.ndarray:
+           limit_margin: float = 0.02, restarts: int = 12, posture=None,
+           posture_weight: float = 0.0) -> np.ndarray:
         """Joint configuration placing the flange at `position` (base frame), warm-started at q0.
 
         Levenberg-Marquardt damped least squares with a monotone line search and joint-limit
-        clamping (joints pinned at a limit leave the step). A target `rotation` (3, 3) is a soft
-        task: the solver first minimises |e_pos|^2 + (orientation_weight |e_rot|)^2 (e_rot in
-        radians), then polishes the position alone with minimum-norm steps, so an unreachable
-        orientation never costs position accuracy. The first attempt starts at q0, so a sequence
-        of nearby targets gives a smooth joint path; if it fails, `restarts` deterministic random
-        starts are tried. The result stays `limit_margin` rad inside the joint limits.
+        clamping (joints pinned at a limit leave the step). A target `rotation` (3, 3) and a
+        preferred `posture` (dof,) are soft tasks: the solver first minimises
+        |e_pos|^2 + (orientation_weight |e_rot|)^2 + (posture_weight |q - posture|)^2 (e_rot in
+        radians, the posture's in rad, weights in m/rad), then polishes the position alone with
+        minimum-norm steps, so neither soft task ever costs position accuracy. The first attempt
+        starts at q0, so a sequence of nearby targets gives a smooth joint path; if it fails,
+        `restarts` deterministic random starts are tried. The result stays `limit_margin` rad
+        inside the joint limits.
         Raises ValueError when no attempt gets within `tol` metres (and, if given, `rotation_tol`
         radians).
         """
+        target, q0, R_target, posture = self._ik_inputs(position, q0, rotation,
+                                                        orientation_weight, posture,
+                                                        posture_weight)
+        lo = self.lower + limit_margin
+        hi = self.upper - limit_margin
+        rng = np.random.default_rng(12345)
+        starts = [np.clip(q0, lo, hi)] + [rng.uniform(lo, hi) for _ in range(restarts)]
+        best = None
+        for start in starts:
+            q, pos_err = self._attempt(target, start, R_target, orientation_weight, posture,
+                                       posture_weight, max_iters, tol, lo, hi)
+            rot_err = self._rotation_error(q, R_target) if R_target is not None else 0.0
+            if pos_err <= tol and (rotation_tol is None or rot_err <= rotation_tol):
+                return q
+            if best is None or pos_err < best[0]:
+                best = (pos_err, rot_err)
+        raise ValueError(
+            f'IK did not converge to {target.tolist()} within {tol} m '
+            f'(best position error {best[0]:.4f} m, rotation error {best[1]:.3f} rad)')
+
+    def closest(self, position, q0, *, posture=None, posture_weight: float = 0.0,
+                max_change=None, max_iters: int = 100, tol: float = 1e-3,
+                limit_margin: float = 0.02) -> tuple[np.ndarray, float]:
+        """One attempt of :meth:`ik` from q0, never raising for a target out of reach: the
+        configuration (dof,) whose flange is as close to `position` as the solver gets from q0
+        within the limits (less `limit_margin`) and, if given, within `max_change` rad per
+        joint (a number or one per joint) of q0, and that distance in metres. For paths: the
+        solution moves continuously with the target, where ik's restarts could jump to another
+        arm configuration."""
+        target, q0, _, posture = self._ik_inputs(position, q0, None, 0.0, posture,
+                                                 posture_weight)
+        lo = self.lower + limit_margin
+        hi = self.upper - limit_margin
+        if max_change is not None:
+            change = np.broadcast_to(np.asarray(max_change, dtype=float), (self.dof,))
+            if not np.all(change > 0):
+                raise ValueError(f'max_change must be positive, got {max_change!r}')
+            q0 = np.clip(q0, lo, hi)
+            lo, hi = np.maximum(lo, q0 - change), np.minimum(hi, q0 + change)
+        return self._attempt(target, np.clip(q0, lo, hi), None, 0.0, posture, posture_weight,
+                             max_iters, tol, lo, hi)
+
+    def _ik_inputs(self, position, q0, rotation, orientation_weight, posture, posture_weight):
         target = np.asarray(position, dtype=float)
         if target.shape != (3,) or not np.all(np.isfinite(target)):
             raise ValueError(f'position must be 3 finite numbers, got {position!r}')
@@ -202,25 +248,25 @@ class RobotKinematics:
                 raise ValueError('rotation must be orthonormal')
         if not (np.isfinite(orientation_weight) and orientation_weight >= 0):
             raise ValueError('orientation_weight must be >= 0')
-        lo = self.lower + limit_margin
-        hi = self.upper - limit_margin
-        rng = np.random.default_rng(12345)
-        starts = [np.clip(q0, lo, hi)] + [rng.uniform(lo, hi) for _ in range(restarts)]
-        best = None
-        for start in starts:
-            q = start
-            if R_target is not None and orientation_weight > 0:
-                q = self._lm_solve(target, q, R_target, orientation_weight, max_iters, 0.0, lo, hi)
-            q = self._lm_solve(target, q, None, 0.0, max_iters, 0.05 * tol, lo, hi)
-            pos_err = float(np.linalg.norm(self._residual(q, target, None, 0.0)))
-            rot_err = self._rotation_error(q, R_target) if R_target is not None else 0.0
-            if pos_err <= tol and (rotation_tol is None or rot_err <= rotation_tol):
-                return q
-            if best is None or pos_err < best[0]:
-                best = (pos_err, rot_err)
-        raise ValueError(
-            f'IK did not converge to {target.tolist()} within {tol} m '
-            f'(best position error {best[0]:.4f} m, rotation error {best[1]:.3f} rad)')
+        if not (np.isfinite(posture_weight) and posture_weight >= 0):
+            raise ValueError('posture_weight must be >= 0')
+        if posture is not None:
+            posture = self._as_q(posture, 'posture')
+            if not np.all(np.isfinite(posture)):
+                raise ValueError('posture must be finite')
+        return target, q0, R_target, posture
+
+    def _attempt(self, target, q, R_target, w_rot, posture, w_post, max_iters, tol, lo,
+                 hi) -> tuple[np.ndarray, float]:
+        """The soft tasks (if any), then the position alone; (q, position error)."""
+        soft_rotation = R_target is not None and w_rot > 0
+        soft_posture = posture is not None and w_post > 0
+        if soft_rotation or soft_posture:
+            q = self._lm_solve(target, q, R_target if soft_rotation else None, w_rot,
+                               max_iters, 0.0, lo, hi,
+                               (posture, w_post) if soft_posture else None)
+        q = self._lm_solve(target, q, None, 0.0, max_iters, 0.05 * tol, lo, hi)
+        return q, float(np.linalg.norm(self._residual(q, target, None, 0.0)))
 
     def _residual(self, q, target, R_target, w_rot) -> np.ndarray:
         pin.forwardKinematics(self.model, self.data, q)
@@ -231,11 +277,21 @@ class RobotKinematics:
             return e
         return np.concatenate([e, w_rot * pin.log3(R_target @ placement.rotation.T)])
 
-    def _lm_solve(self, target, q, R_target, w_rot, max_iters, stop_err, lo, hi) -> np.ndarray:
+    def _lm_solve(self, target, q, R_target, w_rot, max_iters, stop_err, lo, hi,
+                  posture=None) -> np.ndarray:
+        """``posture``: None or (q_preferred, weight), rows weight (q_preferred - q) appended to
+        the residual; the damping follows the task rows' error only (the posture's never
+        vanishes)."""
         q = np.clip(q, lo, hi)
         rows = 3 if R_target is None else 6
-        e = self._residual(q, target, R_target, w_rot)
+
+        def residual(q):
+            e = self._residual(q, target, R_target, w_rot)
+            return e if posture is None else np.concatenate([e, posture[1] * (posture[0] - q)])
+
+        e = residual(q)
         cost = float(e @ e)
+        n = rows if posture is None else rows + self.dof
         for _ in range(max_iters):
             if np.sqrt(cost) <= stop_err:
                 break
@@ -243,12 +299,16 @@ class RobotKinematics:
                                          pin.LOCAL_WORLD_ALIGNED)[:rows]
             if rows == 6:
                 J[3:] *= w_rot
+            task_cost = cost
+            if posture is not None:
+                J = np.vstack([J, posture[1] * np.eye(self.dof)])
+                task_cost = float(e[:rows] @ e[:rows])
             # Damping grows with the error: Gauss-Newton near the solution, gradient-like far away.
-            lam = 1e-6 + 0.5 * cost
+            lam = 1e-6 + 0.5 * task_cost
             free = np.ones(self.dof, dtype=bool)
             for _attempt in range(3):
                 Jf = J * free
-                dq = Jf.T @ np.linalg.solve(Jf @ Jf.T + lam * np.eye(rows), e)
+                dq = Jf.T @ np.linalg.solve(Jf @ Jf.T + lam * np.eye(n), e)
                 blocked = free & (((q <= lo + 1e-9) & (dq < 0)) | ((q >= hi - 1e-9) & (dq > 0)))
                 if not np.any(blocked):
                     break
@@ -260,7 +320,7 @@ class RobotKinematics:
             alpha = 1.0
             for _ls in range(6):
                 q_new = np.clip(q + alpha * dq, lo, hi)
-                e_new = self._residual(q_new, target, R_target, w_rot)
+                e_new = residual(q_new)
                 cost_new = float(e_new @ e_new)
                 if cost_new < cost:
                     accepted = True

@@ -139,10 +139,13 @@ def _arm_spec(description: RobotDescription, effort_limit) -> mujoco.MjSpec:
 def build_spec(pole: bool = False, stands: bool = True, table: bool = True,
                pole_xy=POLE_XY, pole_radius: float = POLE_RADIUS, pole_height: float = POLE_HEIGHT,
                plate_stand_xy=PLATE_STAND_XY, screw_stand_xy=SCREW_STAND_XY,
-               timestep: float = TIMESTEP, robot=None) -> mujoco.MjSpec:
+               timestep: float = TIMESTEP, robot=None,
+               floor_z: float = FLOOR_Z) -> mujoco.MjSpec:
     """The scene as an MjSpec, for callers that want to add things before compiling.
 
     ``robot``: a description, a shipped robot's name or a description file (None: the iiwa 14).
+    ``floor_z``: the floor's height (nothing touches it; a picture puts it under a person's
+    feet).
     """
     from mixture_ip_ros.robot.kinematics import load_arm_model
     description = load_description(robot)
@@ -160,20 +163,20 @@ def build_spec(pole: bool = False, stands: bool = True, table: bool = True,
     world.add_light(name='sun', pos=[0.5, -0.5, 2.5], dir=[0, 0.3, -1], castshadow=False)
     world.add_camera(name='overview', pos=[2.1, -1.5, 1.3], xyaxes=[0.6, 0.8, 0, -0.35, 0.26, 0.9])
     world.add_camera(name='side', pos=[0.5, -2.2, 0.5], xyaxes=[1, 0, 0, 0, 0.2, 1])
-    _static_geom(world, 'floor', mujoco.mjtGeom.mjGEOM_PLANE, (3, 3, 0.1), (0, 0, FLOOR_Z),
+    _static_geom(world, 'floor', mujoco.mjtGeom.mjGEOM_PLANE, (3, 3, 0.1), (0, 0, floor_z),
                  (0.85, 0.85, 0.85, 1), collide=False)
     if table:
         half = ((TABLE_X[1] - TABLE_X[0]) / 2, (TABLE_Y[1] - TABLE_Y[0]) / 2, TABLE_THICKNESS / 2)
         centre = ((TABLE_X[0] + TABLE_X[1]) / 2, (TABLE_Y[0] + TABLE_Y[1]) / 2,
                   TABLE_TOP_Z - TABLE_THICKNESS / 2)
         _static_geom(world, 'table_top', mujoco.mjtGeom.mjGEOM_BOX, half, centre, _WOOD)
-        leg_half = (TABLE_TOP_Z - TABLE_THICKNESS - FLOOR_Z) / 2
+        leg_half = (TABLE_TOP_Z - TABLE_THICKNESS - floor_z) / 2
         for i, (x, y) in enumerate([(TABLE_X[0] + 0.05, TABLE_Y[0] + 0.05),
                                     (TABLE_X[0] + 0.05, TABLE_Y[1] - 0.05),
                                     (TABLE_X[1] - 0.05, TABLE_Y[0] + 0.05),
                                     (TABLE_X[1] - 0.05, TABLE_Y[1] - 0.05)]):
             _static_geom(world, f'table_leg_{i}', mujoco.mjtGeom.mjGEOM_BOX,
-                         (0.03, 0.03, leg_half), (x, y, FLOOR_Z + leg_half), _WOOD, collide=False)
+                         (0.03, 0.03, leg_half), (x, y, floor_z + leg_half), _WOOD, collide=False)
     if stands:
         for name, xy in (('plate', plate_stand_xy), ('screw', screw_stand_xy)):
             half = (STAND_HALF_SIZE, STAND_HALF_SIZE, STAND_HEIGHT / 2)
@@ -190,11 +193,13 @@ def build_spec(pole: bool = False, stands: bool = True, table: bool = True,
         _static_geom(world, 'pole', mujoco.mjtGeom.mjGEOM_CYLINDER, (pole_radius, pole_height / 2),
                      (pole_xy[0], pole_xy[1], TABLE_TOP_Z + pole_height / 2), (0.2, 0.5, 0.9, 1))
 
-    height = description.mount_xyz[2] - TABLE_TOP_Z
+    # The arm stands on the table, or without one on a column from the floor.
+    ground = TABLE_TOP_Z if table else floor_z
+    height = description.mount_xyz[2] - ground
     if height > 1e-3:
         x, y = description.mount_xyz[:2]
         _static_geom(world, 'robot_pedestal', mujoco.mjtGeom.mjGEOM_CYLINDER,
-                     (PEDESTAL_RADIUS, height / 2), (x, y, TABLE_TOP_Z + height / 2),
+                     (PEDESTAL_RADIUS, height / 2), (x, y, ground + height / 2),
                      (0.3, 0.3, 0.35, 1), collide=False)
 
     wrist = world.add_body(name=HUMAN_WRIST, mocap=True, pos=list(HUMAN_WRIST_DEFAULT))

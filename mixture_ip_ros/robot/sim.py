@@ -16,6 +16,13 @@ from mixture_ip_ros.estimation.plans import JointLimits
 from mixture_ip_ros.robot.trajectory import (DEFAULT_MAX_POINTS, TrajectoryFollower,
                                              TrajectoryPoint, validate_trajectory)
 
+# s a command may arrive after its first point was due and still be executed (re-timed); the
+# estimator's max_clock_offset, for plans resting on observations, is the same.
+DEFAULT_MAX_DELAY = 1.0
+# s of simulated time between log lines about re-timed trajectories (one per plan would be ten
+# a second on a slow link).
+RETIME_LOG_PERIOD = 1.0
+
 
 class RobotSimulation:
     """MuJoCo model + data, trajectory follower and controller, stepped at the model timestep.
@@ -25,6 +32,11 @@ class RobotSimulation:
     controller_mass_scale != 1 gives the controller a deliberately wrong Pinocchio model (all link
     masses and inertias scaled) while MuJoCo keeps the true one. Positions and poses in and out
     are in the robot's base frame (the scene's world frame differs by the description's mount).
+
+    A trajectory whose first point comes too late for the arm to reach it within its limits is
+    re-timed (validate_trajectory: it starts later by the shortfall), counted in
+    ``retimed_count`` with its ``last_delay``, and logged at most once per RETIME_LOG_PERIOD of
+    simulated time; one due more than ``max_delay`` s before it arrived is refused as stale.
     """
 
     def __init__(self, q0=None, pole: bool = False, stands: bool = True, model=None,
@@ -32,7 +44,8 @@ class RobotSimulation:
                  controller_mass_scale: float = 1.0, allow_partial_joints_goal: bool = False,
                  allow_nonzero_velocity_at_trajectory_end: bool = False,
                  open_loop_control: bool = False, logger=None, robot=None,
-                 max_trajectory_points: int | None = DEFAULT_MAX_POINTS, **scene_kwargs):
+                 max_trajectory_points: int | None = DEFAULT_MAX_POINTS,
+                 max_delay: float | None = DEFAULT_MAX_DELAY, **scene_kwargs):
         self.kinematics = RobotKinematics(robot)
         self.description = description = self.kinematics.description
         self.model = model if model is not None else build_scene(
@@ -55,6 +68,11 @@ class RobotSimulation:
         # Enforced on every trajectory, as by a controller with joint limits on.
         self.limits = JointLimits(k.lower, k.upper, k.velocity_limit, k.acceleration_limit)
         self.max_trajectory_points = max_trajectory_points
+        self.max_delay = max_delay
+        self.retimed_count = 0
+        self.last_delay: float | None = None
+        self._retimed_unlogged = 0
+        self._retime_logged_at = -np.inf
         self.rejection_count = 0
         self.last_rejection: str | None = None
         self.accepted_count = 0
@@ -108,6 +126,7 @@ class RobotSimulation:
         self.follower.clear()
         self.controller.reset_hold(q)
         self.reference = None
+        self._retime_logged_at = -np.inf      # the clock may have been set back
 
     # ------------------------------------------------------------------ tracking
     def reset_tracking(self) -> None:
@@ -148,18 +167,34 @@ class RobotSimulation:
         start_time is on the simulation clock (seconds); None starts it at the next step.
         """
         fill = self.reference[0] if self.reference is not None else self.q
+        # The next step anchors the trajectory at the present time, from this state.
+        q, qd = self.follower.blend_state(self.time, self.q, self.qd)
         result = validate_trajectory(
             joint_names, points, start_time, self.time, self.joint_names,
             allow_partial_joints_goal=self.allow_partial_joints_goal,
             allow_nonzero_velocity_at_trajectory_end=self.allow_nonzero_velocity_at_trajectory_end,
-            fill_positions=fill, limits=self.limits,
-            positions_now=fill if self.follower.open_loop else self.q,
-            control_period=self.dt, max_points=self.max_trajectory_points)
+            fill_positions=fill, limits=self.limits, positions_now=q, velocities_now=qd,
+            control_period=self.dt, max_delay=self.max_delay,
+            max_points=self.max_trajectory_points)
         if isinstance(result, str):
             return self.refuse(result)
         self.accepted_count += 1
+        if result.delay > 0:
+            self._retimed(result.delay)
         self.follower.set(result)
         return None
+
+    def _retimed(self, delay: float) -> None:
+        self.retimed_count += 1
+        self.last_delay = delay
+        self._retimed_unlogged += 1
+        if self.time - self._retime_logged_at >= RETIME_LOG_PERIOD:
+            n, self._retimed_unlogged = self._retimed_unlogged, 0
+            self._retime_logged_at = self.time
+            self._log(f'trajectory late: re-timed to start {delay:.3g} s later (its first '
+                      'point could not be reached in time within the joint limits)' if n == 1
+                      else f'{n} trajectories late since the last report, the latest re-timed '
+                      f'to start {delay:.3g} s later')
 
     def refuse(self, reason: str) -> str:
         """Count and log a refused trajectory (one warning each); what the arm is doing goes on

@@ -4,10 +4,16 @@ Acceptance (validate_trajectory) follows JointTrajectoryController::validate_tra
 the default parameters (allow_partial_joints_goal=false, allow_nonzero_velocity_at_trajectory_end=
 false, allow_integration_in_goal_trajectories=false) plus checks JTC lacks: every value finite, no
 duplicate joint names, the joint limits (positions, speeds, accelerations, the mean speed between
-points, a reachable first point) and a cap on the number of points. Interpolation (TrajectoryFollower) follows JTC's Trajectory::sample:
-per segment linear when either end lacks velocities, cubic with velocities, quintic with velocities
-and accelerations; before the first point, a segment from the state measured when the trajectory
-is first sampled; after the last point, hold it. Times are seconds on the caller's clock; None as a
+points) and a cap on the number of points. Given the state the arm will be blended from, it also
+does what a controller's safety layer does with a late command: a first point due before the arm
+can reach it within its speed and acceleration limits (late, or due in the past) is not refused
+but re-timed, the whole trajectory starting later by the shortfall; only a first point due more
+than ``max_delay`` before the command arrived is refused, as stale.
+
+Interpolation (TrajectoryFollower) follows JTC's Trajectory::sample: per segment linear when
+either end lacks velocities, cubic with velocities, quintic with velocities and accelerations;
+before the first point, a segment from the state measured when the trajectory is first sampled;
+after the last point, hold it. Times are seconds on the caller's clock; None as a
 start time means "when first sampled".
 No ROS types here: the node converts messages into TrajectoryPoint lists.
 """
@@ -51,6 +57,9 @@ class JointTrajectory:
     accelerations: np.ndarray
     has_velocities: np.ndarray
     has_accelerations: np.ndarray
+    # s the start was moved later than stamped because the first point came too late to reach
+    # (0: on time).
+    delay: float = 0.0
 
     @property
     def end_time(self) -> float | None:
@@ -100,18 +109,27 @@ def validate_trajectory(joint_names: Sequence[str], points: Sequence[TrajectoryP
                         allow_partial_joints_goal: bool = False,
                         allow_nonzero_velocity_at_trajectory_end: bool = False,
                         fill_positions=None, limits: JointLimits | None = None,
-                        positions_now=None, control_period: float = 0.0,
+                        positions_now=None, velocities_now=None, control_period: float = 0.0,
+                        max_delay: float | None = None,
                         max_points: int | None = None) -> JointTrajectory | str:
     """The accepted trajectory in controller joint order, or the reason for rejecting it.
 
     start_time: when time_from_start = 0 happens, on the same clock as `now` (None: start now).
     fill_positions: positions (controller order) used for joints a partial goal leaves out.
     With ``limits`` (controller order), as a controller that enforces joint limits: every
-    point's positions, velocities and accelerations within them, no mean speed between two
-    points above the speed limit, and, given ``positions_now`` (the arm's present positions),
-    a first point the arm can reach in time: one due within ``control_period`` of now (a first
-    point at or before time zero) must not jump. ``max_points`` caps the length. Every check
-    is on arrays: a long trajectory is refused or accepted without a Python loop per value.
+    point's positions, velocities and accelerations within them, and no mean speed between two
+    points above the speed limit. ``max_points`` caps the length. Every check is on arrays: a
+    long trajectory is refused or accepted without a Python loop per value.
+
+    With ``limits`` and ``positions_now`` (the state the follower will blend from, controller
+    order; ``velocities_now`` zero if not given), lateness is handled, never refused: the first
+    point must be reachable from that state by the follower's blending segment within the speed
+    and acceleration limits by the time it is due (:func:`earliest_reach`; a first point due
+    within ``control_period`` of now counts as due then). If it is not, or it was due in the
+    past, the whole trajectory starts later by the shortfall (``delay`` of the result), as a
+    controller's safety layer scales a command it cannot follow on time; this covers a
+    trajectory whose end is already past. A first point due more than ``max_delay`` s before
+    ``now`` is refused as stale (None: no bound).
     """
     dof = len(controller_joints)
     names = list(joint_names)
@@ -156,11 +174,12 @@ def validate_trajectory(joint_names: Sequence[str], points: Sequence[TrajectoryP
         i = int(np.argmax(steps <= 0)) + 1
         return (f'time_from_start not strictly increasing at point {i} '
                 f'({times[i - 1]} then {times[i]})')
+    retime = limits is not None and positions_now is not None
     if start_time is not None:
         if not np.isfinite(start_time):
             return 'non-finite start time'
         end = start_time + times[-1]
-        if end < now:
+        if end < now and not retime:
             return f'trajectory ends in the past (ends at {end:.6f}, now {now:.6f})'
     pos, _ = arrays['positions']
     vel, has_v = arrays['velocities']
@@ -185,16 +204,25 @@ def validate_trajectory(joint_names: Sequence[str], points: Sequence[TrajectoryP
             i, j = (int(x) for x in np.argwhere(over)[0])
             return (f'points {i} to {i + 1}: {names[j]} moves {speed[i, j]:.3g} rad/s on '
                     f'average, above its limit {limits.velocity[index[j]]:.3g} rad/s')
-        if positions_now is not None:
-            due = (now if start_time is None else start_time) + times[0] - now
-            gap = np.abs(pos[0] - np.asarray(positions_now, dtype=float)[index])
-            reach = limits.velocity[index] * max(due, control_period)
-            if (gap > reach).any():
-                j = int(np.argmax(gap - reach))
-                when = ('at or before now' if due <= control_period
-                        else f'{due:.3g} s from now')
-                return (f'first point ({when}) jumps: {names[j]} is {gap[j]:.3g} rad away, '
-                        f'{reach[j]:.3g} rad reachable at its speed limit')
+    delay = 0.0
+    if retime:
+        due = (now if start_time is None else start_time) + times[0] - now
+        if max_delay is not None and due < -max_delay:
+            return (f'stale: the first point was due {-due:.3g} s before the trajectory '
+                    f'arrived, more than max_delay {max_delay:.3g} s')
+        q = np.asarray(positions_now, dtype=float)[index]
+        qd = (np.zeros(n) if velocities_now is None
+              else np.asarray(velocities_now, dtype=float)[index])
+        kind = blend_kind(bool(has_v[0]), bool(has_a[0]))
+        shortest = max(due, control_period)
+        reach = earliest_reach(q, qd, pos[0], vel[0], kind, limits.velocity[index],
+                               limits.acceleration[index], shortest)
+        if reach is None:
+            return (f'the first point cannot be reached from the present state within the '
+                    f'joint limits in {MAX_REACH_TIME:.0f} s')
+        if due < 0 or reach > shortest:
+            delay = reach - due
+            start_time = (now if start_time is None else start_time) + delay
 
     out_pos = np.zeros((m, dof))
     out_vel = np.zeros((m, dof))
@@ -211,13 +239,97 @@ def validate_trajectory(joint_names: Sequence[str], points: Sequence[TrajectoryP
     out_acc[:, index] = acc
     return JointTrajectory(start_time=None if start_time is None else float(start_time),
                            times=times, positions=out_pos, velocities=out_vel,
-                           accelerations=out_acc, has_velocities=has_v, has_accelerations=has_a)
+                           accelerations=out_acc, has_velocities=has_v, has_accelerations=has_a,
+                           delay=float(delay))
+
+
+# The blending segment's duration is found to this resolution (s).
+REACH_RESOLUTION = 1e-4
+# Longer than any blend a plan needs: a first point not reachable in this time is refused.
+MAX_REACH_TIME = 3600.0
+# Durations tried per doubling when a first point cannot be reached in time (2 % apart).
+REACH_STEPS_PER_OCTAVE = 32
+
+
+def blend_kind(has_velocities: bool, has_accelerations: bool) -> str:
+    """The kind of segment the follower blends from the measured state (positions and
+    velocities, no accelerations, as JTC) into a first point that has these fields."""
+    return _kind(True, False, has_velocities, has_accelerations)
+
+
+def blend_within_limits(T, q, qd, p1, v1, kind, velocity, acceleration) -> np.ndarray:
+    """Whether the follower's blending segment of duration T from (q, qd) into (p1, v1) keeps
+    every joint within its speed and acceleration limits, for each duration of ``T`` (an array
+    (m,) of them; bool (m,)). A present speed at or over a joint's limit is the arm's, not the
+    plan's: that joint's speed bound is then its present speed.
+
+    Exact, not sampled: the blend is of degree <= 3, so its speed is extreme at the ends (qd and
+    v1, taken as given: a plan may run at exactly its limit) or at the vertex of its parabola
+    inside the segment, and its acceleration (linear) at the ends. The linear blend of a first
+    point without velocities has a constant speed and no acceleration within it (JTC's)."""
+    T = np.asarray(T, dtype=float)[:, None]
+    zero = np.zeros_like(q)
+    c = segment_coefficients(T, q, qd, zero, p1, v1, zero, kind)
+    if kind == 'linear':
+        return np.all(np.abs(c[1]) <= velocity, axis=1)
+    if kind != 'cubic':
+        raise ValueError(f'the follower never blends with a {kind!r} segment')
+    c1, c2, c3 = c[1], c[2], c[3]
+    with np.errstate(divide='ignore', invalid='ignore'):
+        vertex = -c2 / (3.0 * c3)
+    inside = (c3 != 0.0) & (vertex > 0.0) & (vertex < T)
+    s = np.where(inside, vertex, 0.0)
+    speed = np.maximum(np.abs(v1), np.where(inside, np.abs(c1 + 2 * c2 * s + 3 * c3 * s * s),
+                                            0.0))
+    accel = np.maximum(np.abs(2 * c2), np.abs(2 * c2 + 6 * c3 * T))
+    return (np.all(speed <= np.maximum(velocity, np.abs(qd)), axis=1)
+            & np.all(accel <= acceleration, axis=1))
+
+
+def earliest_reach(q, qd, p1, v1, kind, velocity, acceleration, shortest: float,
+                   resolution: float = REACH_RESOLUTION,
+                   longest: float = MAX_REACH_TIME) -> float | None:
+    """The shortest duration >= ``shortest`` of the follower's blending segment from (q, qd)
+    into (p1, v1) within the limits (:func:`blend_within_limits`), or None if no duration up to
+    ``longest`` s is.
+
+    ``shortest`` itself if that is within them. Otherwise the first of the durations from
+    ``shortest`` to ``longest`` in steps of 2^(1/REACH_STEPS_PER_OCTAVE) that is within them,
+    then bisection to ``resolution`` between it and the step before. Feasibility is not
+    monotonic in the duration when the arm is moving (arriving with its momentum can be within
+    the limits where a longer blend that must brake and accelerate again is not), so the steps
+    are all evaluated, in one vectorised call, rather than doubled until one fits. The end of
+    the last bracket that is within the limits is returned: the result always is. A bounded
+    number of evaluations: it always terminates."""
+    shortest = max(float(shortest), resolution)
+
+    def ok(T):
+        return blend_within_limits(np.atleast_1d(T), q, qd, p1, v1, kind, velocity,
+                                   acceleration)
+    if ok(shortest)[0]:
+        return shortest
+    steps = int(np.ceil(REACH_STEPS_PER_OCTAVE * np.log2(max(longest / shortest, 2.0))))
+    grid = np.minimum(shortest * 2.0 ** (np.arange(1, steps + 1) / REACH_STEPS_PER_OCTAVE),
+                      longest)
+    feasible = ok(grid)
+    if not feasible.any():
+        return None
+    i = int(np.argmax(feasible))
+    low, high = (shortest if i == 0 else float(grid[i - 1])), float(grid[i])
+    while high - low > resolution:
+        middle = 0.5 * (low + high)
+        if ok(middle)[0]:
+            high = middle
+        else:
+            low = middle
+    return high
 
 
 def segment_coefficients(T, p0, v0, a0, p1, v1, a1, kind: str) -> np.ndarray:
-    """Polynomial coefficients c (6, dof), p(s) = sum_k c_k s^k for s in [0, T]."""
+    """Polynomial coefficients c (6, dof), p(s) = sum_k c_k s^k for s in [0, T]; for an array T
+    (m, 1) of durations, c (6, m, dof)."""
     dof = len(p0)
-    c = np.zeros((6, dof))
+    c = np.zeros((6,) + np.broadcast_shapes(np.shape(T), (dof,)))
     c[0] = p0
     if kind == 'linear':
         c[1] = (p1 - p0) / T
@@ -358,12 +470,17 @@ class TrajectoryFollower:
         self._block = (plan, times, refs, m)
         return refs[:m]
 
+    def blend_state(self, t: float, q, qd):
+        """The state a trajectory anchored at ``t`` is blended from: the measured (q, qd), or
+        with open_loop the anchored trajectory's reference there (if there is one)."""
+        if self.open_loop and self._plan is not None:
+            q, qd, _ = self._sample_plan(self._plan, t)
+        return q, qd
+
     def _take_pending(self, t, q, qd):
         """Anchor a trajectory set since the last sample at ``t``."""
         if self._pending is not None:
-            if self.open_loop and self._plan is not None:
-                q, qd, _ = self._sample_plan(self._plan, t)
-            self._plan = self._anchor(self._pending, t, q, qd)
+            self._plan = self._anchor(self._pending, t, *self.blend_state(t, q, qd))
             self._pending = None
 
     def _sample_plan(self, plan: _Plan, t: float):

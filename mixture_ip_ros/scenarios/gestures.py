@@ -8,8 +8,7 @@ identification system", TSP 2012), edited by H. A. Dau for the UCR archive.
 
 It is fetched at run time from the aeon wheel on PyPI (``pip download aeon==1.6.0 --no-deps``
 into a user cache; only the two .ts files are kept), so a fresh machine needs no manual step
-and nothing of the archive is redistributed. The cache is ``$MIXTURE_IP_CACHE`` or
-``$XDG_CACHE_HOME/mixture_ip_ros`` (default ``~/.cache/mixture_ip_ros``).
+and nothing of the archive is redistributed. The cache is io.cache's.
 
 The archive gives no sample rate; times assume the Wiimote's usual 100 Hz report rate (it only
 scales alpha and the online estimator's decimation interval, never the data). Each recording is
@@ -17,7 +16,7 @@ a single-agent demonstration (1 observed DOF, nothing controlled), whole, as the
 t = 0 at its first sample. Cutting the rest off either end removed information the people
 differ by: in 5-fold cross-validation on the training split (bench/gesture_representation.py,
 supervised mixture, whole gesture observed, phase known / unknown) whole recordings 66 / 58 %,
-cut at the movement onset (:func:`core.segmentation.segment_rest_deviation`) 44 / 28 %, cut at
+cut at the movement onset (bench/_common.py's segment_rest_deviation) 44 / 28 %, cut at
 its onset and end 42 / 38 %. The end cut was wrong on recordings that stop before the hand
 settles (the Wiimote rests at a new tilt, or never rests), and how long a person waits before
 moving is part of how that person makes the gesture.
@@ -25,7 +24,6 @@ moving is part of how that person makes the gesture.
 
 from __future__ import annotations
 
-import os
 import shutil
 import subprocess
 import sys
@@ -36,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from mixture_ip_ros.core.demonstration import Demonstration, Layout
+from mixture_ip_ros.io.cache import cache_dir
 from mixture_ip_ros.io.ucr import read_ts
 
 DATASET = 'PickupGestureWiimoteZ'
@@ -44,13 +43,6 @@ RATE = 100.0                     # Hz (assumed, see the module docstring)
 LAYOUT = Layout(('accel_z',), (), ('g',))
 SOURCE = (f'{DATASET}, UCR time series archive (Guna, Humar, Pogacnik, TSP 2012; edited by '
           f'H. A. Dau), from the aeon {AEON_VERSION} wheel')
-
-
-def cache_dir() -> Path:
-    if os.environ.get('MIXTURE_IP_CACHE'):
-        return Path(os.environ['MIXTURE_IP_CACHE'])
-    base = os.environ.get('XDG_CACHE_HOME') or Path.home() / '.cache'
-    return Path(base) / 'mixture_ip_ros'
 
 
 def fetch_ucr(name: str = DATASET, cache: Path | None = None) -> Path:

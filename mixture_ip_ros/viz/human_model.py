@@ -24,8 +24,9 @@ ROOT_BODY = 'middle_pelvis'
 WORLD_FROM_ISB = np.array([[-1.0, 0.0, 0.0],
                           [0.0, 0.0, 1.0],
                           [0.0, 1.0, 0.0]])
-# Standing spot of data/scenarios.py's person: about 1.35 m from the robot, body against the table
-# edge, right hand hanging at y = 0.24 (its rest on the table edge, HUMAN_REST = (1.22, 0.24, 0.08)).
+# Standing spot of scenarios/recording.py's person: about 1.35 m from the robot, body against the
+# table edge, right hand hanging at y = 0.24 (its rest on the table edge, HUMAN_REST =
+# (1.22, 0.24, 0.08)).
 DEFAULT_PELVIS_XY = (TABLE_X[1] + 0.10, 0.03)
 
 # Joints the wrist IK moves, with their cost in the IK's joint metric: the arm moves freely,
@@ -119,6 +120,18 @@ def pelvis_height() -> float:
         world = data.geom_xpos[g] + verts @ data.geom_xmat[g].reshape(3, 3).T
         lowest = min(lowest, float(world[:, 1].min()))    # ISB y is up
     return float(data.xpos[model.body(ROOT_BODY).id][1] - lowest)
+
+
+@functools.lru_cache(maxsize=1)
+def collar_height() -> float:
+    """Height of the collar (the clavicles' joint, between the shoulders) above the lowest point
+    of the feet, in the upright posture: where a skeleton tracker's body frame has its origin."""
+    model = human_spec().compile()
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    pelvis = data.xpos[model.body(ROOT_BODY).id]
+    collar = data.xpos[model.body('right_clavicle').id]
+    return float(pelvis_height() + collar[1] - pelvis[1])      # ISB y is up
 
 
 def add_human(spec: mujoco.MjSpec, pelvis_xy=DEFAULT_PELVIS_XY, floor_z: float = FLOOR_Z,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+import textwrap
 
 import matplotlib
 
@@ -387,13 +388,10 @@ def clusters_vs_labels(path, counts, component_names, class_names, title):
     save_figure(fig, path)
 
 
-def loglik_vs_k(path, candidates, scores, chosen, title, note=''):
-    """Cross-validated held-out log-likelihood per demonstration vs K, relative to the first
-    candidate (paired), mean +- standard error."""
-    s = np.asarray(scores, dtype=float)
-    d = s - s[0]
-    mean = d.mean(axis=1)
-    se = d.std(axis=1, ddof=1) / np.sqrt(d.shape[1])
+def k_curve(path, candidates, mean, se, chosen, title, note=''):
+    """A criterion for K (higher is better) vs K: its mean per demonstration relative to the
+    first candidate, +- its standard error, the chosen K circled."""
+    mean = np.asarray(mean, dtype=float) - float(mean[0])
     fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
     ax.errorbar(candidates, mean, yerr=se, fmt='o-', capsize=4, color='k',
                 label='mean +- s.e. over held-out demonstrations')
@@ -401,10 +399,62 @@ def loglik_vs_k(path, candidates, scores, chosen, title, note=''):
     ax.plot([chosen], [mean[i]], 'o', ms=12, mfc='none', mec='tab:red', mew=2,
             label=f'selected K = {chosen}')
     ax.set_xlabel('number of mixture components K')
-    ax.set_ylabel(f'held-out log-likelihood - that of K = {candidates[0]} [nats]')
+    ax.set_ylabel(f'relative to K = {candidates[0]} [nats per demonstration]')
     ax.set_xticks(list(candidates))
-    import textwrap
     ax.set_title('\n'.join([title] + textwrap.wrap(note, 90)), fontsize=9)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
+    save_figure(fig, path)
+
+
+def errors_vs_fraction(path, fractions, errors, title, ylabel):
+    """Mean error of every method vs the fraction of the movement observed, with the standard
+    error of the mean as a band. ``errors``: {name: (recordings, fractions) array, NaN where
+    not defined}."""
+    fig, ax = plt.subplots(figsize=(9.5, 4.4), constrained_layout=True)
+    f = 100 * np.asarray(fractions)
+    for i, (name, e) in enumerate(errors.items()):
+        e = np.asarray(e, dtype=float)
+        mean = np.nanmean(e, axis=0)
+        se = np.nanstd(e, axis=0) / np.sqrt(np.maximum(np.sum(~np.isnan(e), axis=0), 1))
+        ax.plot(f, mean, marker='osd^v'[i % 5], color=f'C{i}', label=name)
+        ax.fill_between(f, mean - se, mean + se, color=f'C{i}', alpha=0.15)
+    ax.set_xlabel('observed part of the movement [%]')
+    ax.set_ylabel(ylabel)
+    ax.set_xticks(f)
+    ax.set_ylim(bottom=0)
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=8, loc='center left', bbox_to_anchor=(1.01, 0.5))
+    ax.grid(alpha=0.3)
+    save_figure(fig, path)
+
+
+def partner_paths(path, examples, scale=100.0):
+    """Predicted against recorded controlled agent, one row per example (one recording per
+    interaction): (demonstration, rows predicted, prediction (m, Q), name of the component),
+    each DOF against time; the observed agent's recorded path beside it."""
+    if not examples:
+        return
+    Q = examples[0][0].n_controlled_dofs
+    P = examples[0][0].n_observed_dofs
+    fig, axes = plt.subplots(len(examples), 2, figsize=(11, 2.3 * len(examples)),
+                             constrained_layout=True, squeeze=False)
+    for r, (demo, rest, pred, chosen) in enumerate(examples):
+        ax_o, ax_c = axes[r]
+        for j in range(P):
+            ax_o.plot(demo.t, scale * demo.observed[:, j], color=f'C{j}', lw=1)
+        ax_o.axvspan(demo.t[0], demo.t[rest[0]] if len(rest) else demo.t[-1], color='0.9')
+        ax_o.set_ylabel(f'{demo.label}\nobserved', fontsize=8)
+        for j in range(Q):
+            ax_c.plot(demo.t, scale * demo.controlled[:, j], color=f'C{j}', lw=1,
+                      label='recorded' if j == 0 else None)
+            ax_c.plot(demo.t[rest], scale * pred[:, j], color=f'C{j}', lw=2, ls='--',
+                      label=f'predicted ({chosen})' if j == 0 else None)
+        ax_c.axvspan(demo.t[0], demo.t[rest[0]] if len(rest) else demo.t[-1], color='0.9')
+        ax_c.legend(fontsize=7, loc='upper right')
+    axes[0, 0].set_title('observed agent (grey: the part observed)', fontsize=9)
+    axes[0, 1].set_title('controlled agent: recorded (solid) and predicted (dashed)',
+                         fontsize=9)
+    axes[-1, 0].set_xlabel('t [s]')
+    axes[-1, 1].set_xlabel('t [s]')
     save_figure(fig, path)

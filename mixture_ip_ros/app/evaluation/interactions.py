@@ -1,0 +1,254 @@
+"""Real two-person interactions (NuiSI v1 and v2), and any folder of labelled recordings: do the
+patterns the package finds without labels match the interactions, and how well does it
+recognise the interaction and predict the partner from part of the observed person's movement?
+
+Stratified 5-fold cross-validation (seed 0): in each fold the package trains on the other four
+folds as ``training.train`` does (K chosen from those recordings only, covariance floor
+calibrated), labels only name its components afterwards (majority). Per fold:
+
+- ``ari``: the training recordings' components against their interactions (adjusted Rand
+  index); ``heldout_ari``: the held-out recordings', each in the component most probable given
+  its whole observed path (eq. 11, phase known);
+- online, phase unknown, as the estimator node works (OnlineEstimator fed the first 30, 50, 70,
+  100 % of the observed agent at its decimation rate): the interaction recognised (the MAP
+  component's name), and the controlled agent predicted over the rest of the interaction under
+  the MAP (component, phase speed) against the recorded one: RMS over the remaining samples and
+  the error at the last one;
+- the same for the model with K = 1 and the supervised model (one component per interaction);
+- baselines on the same folds: k-means and a GaussianMixture on the resampled paths of both
+  agents with the true number of interactions (ARI), and the nearest training recording by
+  open-end DTW on the observed prefix (its interaction; its partner path, time-scaled).
+Numbers are means over the held-out recordings of all folds (ARIs: over the folds).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+import time
+
+import numpy as np
+
+from mixture_ip_ros.app.evaluation.baselines import NearestNeighbour, clustering_baselines
+from mixture_ip_ros.app.evaluation.common import (EvalConfig, feed_until, majority_labels,
+                                                  trained)
+from mixture_ip_ros.core.online import OnlineEstimator
+from mixture_ip_ros.viz import plots
+
+FRACTIONS = (0.3, 0.5, 0.7, 1.0)
+N_FOLDS = 5
+
+
+def interactions_config(quick: bool = False) -> EvalConfig:
+    """K over 1..9 (more than the six interactions of v1); quick: 1..6."""
+    return EvalConfig(candidates=tuple(range(1, 7 if quick else 10)), fractions=FRACTIONS)
+
+
+def stratified_folds(labels, n_folds: int = N_FOLDS, seed: int = 0) -> np.ndarray:
+    """Fold of each recording: every label's recordings dealt round the folds in a seeded
+    order, so each fold holds about 1/n_folds of every interaction."""
+    labels = np.asarray(labels)
+    rng = np.random.default_rng(seed)
+    fold = np.empty(len(labels), dtype=int)
+    start = 0
+    for lbl in sorted(set(labels.tolist()), key=str):
+        members = rng.permutation(np.flatnonzero(labels == lbl))
+        fold[members] = (start + np.arange(len(members))) % n_folds
+        start += len(members)
+    return fold
+
+
+def _ari(a, b) -> float:
+    from sklearn.metrics import adjusted_rand_score
+    return float(adjusted_rand_score(a, b))
+
+
+class _Online:
+    """A model's OnlineEstimator fed one recording's observed agent fraction by fraction."""
+
+    def __init__(self, model, config: EvalConfig):
+        self.model = model
+        self.config = config
+
+    def run(self, demo, fractions):
+        """Per fraction (component, predicted controlled agent at the samples after the prefix
+        (m, Q) or None, their rows)."""
+        est = OnlineEstimator(self.model, n_alpha=self.config.n_alpha,
+                              min_interval=self.config.min_interval)
+        rows = np.flatnonzero(~np.isnan(demo.observed).any(axis=1))
+        out, j = [], 0
+        for f in fractions:
+            t_f = f * demo.duration + 1e-9
+            j = feed_until(est, demo, rows, j, t_f)
+            rest = np.flatnonzero((demo.t > t_f) & ~np.isnan(demo.controlled).any(axis=1))
+            k, alpha = est.map_hypothesis()
+            pred = None
+            if rest.size:
+                z = np.clip(alpha * demo.t[rest], 0.0, 1.0)
+                pred = est.mean_trajectories(z, component=k, alpha=alpha)[2][0]
+            out.append((int(k), pred, rest))
+        return out
+
+
+def _errors(pred, truth):
+    """(RMS over the samples, error at the last one), metres."""
+    d = np.linalg.norm(pred - truth, axis=1)
+    return float(np.sqrt(np.mean(d ** 2))), float(d[-1])
+
+
+def evaluate_labelled(demos, out_dir: Path, config: EvalConfig = None, name: str = 'recordings',
+                      seed: int = 0, cm: bool = True) -> dict:
+    """The cross-validated metrics of the module docstring for labelled Demonstrations (any
+    numbers of observed and controlled DOFs; partner errors need a controlled agent); plots
+    go to ``out_dir`` prefixed with ``name``. ``cm``: errors reported in cm (the DOFs in
+    metres), else in the DOFs' own unit."""
+    config = config or interactions_config()
+    demos = list(demos)
+    labels = np.array([d.label for d in demos])
+    if any(lbl is None for lbl in labels):
+        raise ValueError('the evaluation needs a label for every recording')
+    classes = sorted(set(labels.tolist()), key=str)
+    if len(classes) < 2 or min(np.sum(labels == c) for c in classes) < N_FOLDS:
+        raise ValueError(f'{N_FOLDS}-fold cross-validation needs at least {N_FOLDS} recordings '
+                         f'of each of at least 2 labels, got {len(demos)} of {len(classes)}')
+    has_partner = demos[0].n_controlled_dofs > 0
+    unit = 100.0 if cm else 1.0
+    fractions = tuple(float(f) for f in config.fractions)
+    keys = [f'{f:g}' for f in fractions]
+    fold = stratified_folds(labels, N_FOLDS, seed)
+    methods = ('mixture', 'single', 'supervised', 'nearest')
+    right = {m: np.zeros((len(demos), len(fractions)), dtype=bool) for m in methods}
+    rms = {m: np.full((len(demos), len(fractions)), np.nan) for m in methods}
+    final = {m: np.full((len(demos), len(fractions)), np.nan) for m in methods}
+    per_fold = []
+    examples = {}
+    timings = {'training_s': 0.0, 'online_s': 0.0, 'baselines_s': 0.0}
+    for f in range(N_FOLDS):
+        train_i, test_i = np.flatnonzero(fold != f), np.flatnonzero(fold == f)
+        train = [demos[i] for i in train_i]
+        t0 = time.perf_counter()
+        model, info = trained(train, config, random_state=seed)
+        single, _ = trained(train, config, n_components=1)
+        supervised, _ = trained(train, config, labels=labels[train_i])
+        timings['training_s'] += time.perf_counter() - t0
+        names = majority_labels(model, train)
+        comp_train = np.argmax(model.resp_, axis=1)
+        heldout = [int(np.argmax(model.component_posterior(
+            demos[i].phase[ok], demos[i].observed[ok], alpha=1.0 / demos[i].duration)))
+            for i in test_i for ok in [~np.isnan(demos[i].observed).any(axis=1)]]
+        t0 = time.perf_counter()
+        namers = {'mixture': (model, names), 'single': (single, majority_labels(single, train)),
+                  'supervised': (supervised, list(supervised.classes_))}
+        for m, (mod, nm) in namers.items():
+            online = _Online(mod, config)
+            for i in test_i:
+                for c, (k, pred, rest) in enumerate(online.run(demos[i], fractions)):
+                    right[m][i, c] = nm[k] == labels[i]
+                    if pred is not None and has_partner:
+                        rms[m][i, c], final[m][i, c] = _errors(pred, demos[i].controlled[rest])
+                        if m == 'mixture' and abs(fractions[c] - 0.5) < 1e-9:
+                            examples.setdefault(labels[i], (demos[i], rest, pred, nm[k]))
+        timings['online_s'] += time.perf_counter() - t0
+        t0 = time.perf_counter()
+        clustering = clustering_baselines(train, labels[train_i], len(classes),
+                                          seeds=range(seed, seed + 5))
+        nn = NearestNeighbour(config.min_interval).fit(train, labels[train_i])
+        for i in test_i:
+            d = demos[i]
+            for c, (j, scale) in enumerate(nn.matches(d, fractions)):
+                rest = np.flatnonzero((d.t > fractions[c] * d.duration + 1e-9)
+                                      & ~np.isnan(d.controlled).any(axis=1))
+                label, pred = nn.predict(j, scale, d.t[rest])
+                right['nearest'][i, c] = label == labels[i]
+                if rest.size and has_partner:
+                    rms['nearest'][i, c], final['nearest'][i, c] = _errors(pred,
+                                                                           d.controlled[rest])
+        timings['baselines_s'] += time.perf_counter() - t0
+        per_fold.append({'n_components': int(info['n_components']),
+                         'prior_scale': info['prior_scale'],
+                         'clear_optimum': bool(info['selection']['clear_optimum']),
+                         'curve': info['selection']['mean'],
+                         'ari': _ari(labels[train_i], comp_train),
+                         'heldout_ari': _ari(labels[test_i], heldout),
+                         'component_labels': names,
+                         'baseline_kmeans_ari': clustering['kmeans'],
+                         'baseline_gmm_pca_ari': clustering['gmm_pca']})
+
+    def by_fraction(values, scale=1.0):
+        return {k: (None if np.all(np.isnan(values[:, c])) else
+                    float(scale * np.nanmean(values[:, c]))) for c, k in enumerate(keys)}
+    accuracy = {m: {k: float(right[m][:, c].mean()) for c, k in enumerate(keys)}
+                for m in methods}
+    metrics = {
+        'n_recordings': len(demos), 'interactions': classes, 'n_folds': N_FOLDS,
+        'n_components_selected': [p['n_components'] for p in per_fold],
+        'ari': float(np.mean([p['ari'] for p in per_fold])),
+        'heldout_ari': float(np.mean([p['heldout_ari'] for p in per_fold])),
+        'recognition_accuracy_by_fraction': accuracy['mixture'],
+        'baseline_kmeans_ari': float(np.mean([p['baseline_kmeans_ari'] for p in per_fold])),
+        'baseline_gmm_pca_ari': float(np.mean([p['baseline_gmm_pca_ari'] for p in per_fold])),
+        'baseline_nn_accuracy_by_fraction': accuracy['nearest'],
+        'single_accuracy_by_fraction': accuracy['single'],
+        'supervised_accuracy_by_fraction': accuracy['supervised'],
+        'folds': per_fold,
+    }
+    err_unit = 'cm' if cm else 'unit'
+    if has_partner:
+        metrics.update({
+            f'partner_rms_{err_unit}_by_fraction': by_fraction(rms['mixture'], unit),
+            f'partner_final_{err_unit}_by_fraction': by_fraction(final['mixture'], unit),
+            f'baseline_nn_partner_rms_{err_unit}_by_fraction': by_fraction(rms['nearest'], unit),
+            f'baseline_nn_partner_final_{err_unit}_by_fraction': by_fraction(final['nearest'],
+                                                                            unit),
+            f'single_partner_rms_{err_unit}_by_fraction': by_fraction(rms['single'], unit),
+            f'single_partner_final_{err_unit}_by_fraction': by_fraction(final['single'], unit),
+            f'supervised_partner_rms_{err_unit}_by_fraction': by_fraction(rms['supervised'],
+                                                                          unit),
+            f'supervised_partner_final_{err_unit}_by_fraction': by_fraction(final['supervised'],
+                                                                            unit)})
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    chance = max(np.mean(labels == c) for c in classes)
+    plots.accuracy_vs_fraction(
+        out_dir / f'{name}_accuracy_vs_fraction.png', fractions,
+        {'mixture, K chosen, phase unknown (online)': [accuracy['mixture'][k] for k in keys],
+         'mixture, supervised, online': [accuracy['supervised'][k] for k in keys],
+         '1-NN open-end DTW (baseline)': [accuracy['nearest'][k] for k in keys]}, {},
+        f'{name}: the interaction recognised from part of the observed movement',
+        chance=chance)
+    names_plot = [f'{name}_accuracy_vs_fraction.png']
+    if has_partner:
+        plots.errors_vs_fraction(
+            out_dir / f'{name}_partner_error_vs_fraction.png', fractions[:-1],
+            {'mixture, K chosen': rms['mixture'][:, :-1] * unit,
+             'mixture, supervised': rms['supervised'][:, :-1] * unit,
+             'one ProMP (K = 1)': rms['single'][:, :-1] * unit,
+             'nearest neighbour (baseline)': rms['nearest'][:, :-1] * unit},
+            f'{name}: the partner predicted over the rest of the interaction',
+            f'RMS over the rest [{"cm" if cm else "DOF unit"}]')
+        plots.partner_paths(out_dir / f'{name}_partner_paths.png',
+                            [examples[c] for c in classes if c in examples], scale=unit)
+        names_plot += [f'{name}_partner_error_vs_fraction.png', f'{name}_partner_paths.png']
+    metrics['timings_s'] = {k: round(v, 2) for k, v in timings.items()}
+    metrics['units'] = {'ari': 'adjusted Rand index, mean over folds',
+                        'accuracy': 'fraction of held-out recordings (all folds)',
+                        'partner': f'{err_unit}: RMS of the controlled agent over the samples '
+                                   'after the observed fraction, and its error at the last '
+                                   'one, mean over held-out recordings (no rest after 100 %)',
+                        'chance': 'the largest interaction share'}
+    metrics['chance_accuracy'] = float(chance)
+    metrics['config'] = config.to_dict()
+    metrics['plots'] = names_plot
+    return metrics
+
+
+def evaluate_nuisi(out_dir: Path, config: EvalConfig = None, seed: int = 0,
+                   versions=('v1', 'v2')) -> dict:
+    """NuiSI v1 and v2 (scenarios.nuisi): every recording of both upstream splits, person 1's
+    hand observed, person 2's controlled. {version: metrics} plus the source."""
+    from mixture_ip_ros.scenarios import nuisi
+    out = {}
+    for v in versions:
+        demos = nuisi.demonstrations(v, 'train') + nuisi.demonstrations(v, 'test')
+        out[v] = {'source': nuisi.SOURCE.format(version=v, commit=nuisi.VERSIONS[v].commit),
+                  **evaluate_labelled(demos, out_dir, config, name=f'nuisi_{v}', seed=seed)}
+    return out

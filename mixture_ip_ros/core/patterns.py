@@ -1,0 +1,248 @@
+"""Pattern discovery: which demonstrations show the same interaction, and how many there are.
+
+ProMP weights are not paths. The basis functions overlap, so a weight vector can move a long
+way in directions that barely change its path (eq. 14 with overlapping Gaussians is ill-
+conditioned), and on real recordings those directions vary far more within an interaction than
+the directions that tell interactions apart. Distances between demonstrations are therefore
+taken between their paths: w -> L^T w per DOF, with M = L L^T the basis functions' Gram matrix
+over the phase (:meth:`GaussianBasis.gram`), so that |L^T (w1 - w2)|^2 is the mean squared
+distance between the two paths.
+
+A dozen demonstrations per pattern cannot estimate a covariance of 45-150 weights, and a mixture
+fitted there puts every demonstration in a cluster of its own or all in one. Patterns are found
+in a small space instead (:class:`PatternSpace`): each agent's path coordinates scaled to unit
+total variance (a pattern is a movement of both agents, whatever number of DOFs describes
+each), then the principal components that hold ``variance`` (90 %) of the spread. There a
+Gaussian mixture (:class:`PatternMixture`) has full covariances shrunk towards the covariance
+pooled within its components (``prior_strength`` pseudo-demonstrations, as the weight model's
+prior), so a component with few members borrows the shape the others share. The number of
+patterns is where the leave-one-out log-likelihood of held-out demonstrations in that space
+stops rising (:func:`heldout_curve`, read by ``mixture.selection_curve``).
+
+The full Mixture of Interaction ProMPs (core.mixture) starts its EM from these clusters.
+"""
+
+from typing import NamedTuple
+
+import numpy as np
+from scipy import linalg
+
+from .basis import GaussianBasis
+from .kmeans import kmeans
+from .promp import LOG_2PI
+
+# Share of the spread between demonstrations the pattern space keeps.
+VARIANCE_KEPT = 0.9
+
+
+def path_coordinates(W, n_basis: int) -> np.ndarray:
+    """Stacked weights W (n, D * N) in the metric of their paths: every DOF's block w_j ->
+    L^T w_j with L the lower Cholesky factor of the basis Gram matrix. (n, D * N)"""
+    W = np.asarray(W, dtype=float)
+    n, d = W.shape
+    if d % n_basis:
+        raise ValueError(f'{d} weights are not a whole number of DOFs of {n_basis} basis functions')
+    L = np.linalg.cholesky(GaussianBasis(n_basis).gram())
+    return (W.reshape(n, d // n_basis, n_basis) @ L).reshape(n, d)
+
+
+class PatternSpace:
+    """The small space patterns are told apart in (see the module docstring): fitted on the
+    weights of training demonstrations, it maps any demonstration's weights into it.
+
+    ``n_observed``: DOFs of the observed agent (the first ``n_observed`` weight blocks), the
+    rest are the controlled agent's. ``min_components``: at least this many principal
+    components (K patterns need K - 1 directions between their means, which need not hold 10 %
+    of the spread when two patterns are close). Fitted attributes: ``mean_`` (D N,), ``scale_`` (D,) per
+    DOF (one value per agent), ``components_`` (q, D N), ``explained_variance_ratio_`` (q,).
+    """
+
+    def __init__(self, n_basis: int, n_observed: int, variance: float = VARIANCE_KEPT,
+                 min_components: int = 1):
+        self.n_basis = n_basis
+        self.n_observed = n_observed
+        self.variance = variance
+        self.min_components = min_components
+
+    def fit(self, W) -> 'PatternSpace':
+        if not 0 < self.variance <= 1:
+            raise ValueError(f'variance must be in (0, 1], got {self.variance!r}')
+        V = path_coordinates(W, self.n_basis)
+        n, d = V.shape
+        D = d // self.n_basis
+        if not 0 < self.n_observed <= D:
+            raise ValueError(f'n_observed must be in 1..{D}, got {self.n_observed!r}')
+        if n < 2:
+            raise ValueError(f'a pattern space needs at least 2 demonstrations, got {n}')
+        self.mean_ = V.mean(axis=0)
+        dof_var = ((V - self.mean_) ** 2).reshape(n, D, self.n_basis).sum(axis=2).mean(axis=0)
+        scale = np.empty(D)
+        for agent in (slice(0, self.n_observed), slice(self.n_observed, D)):
+            scale[agent] = np.sqrt(max(dof_var[agent].sum(), 1e-300))
+        self.scale_ = scale
+        X = self._scaled(V)
+        _, s, vt = np.linalg.svd(X, full_matrices=False)
+        ratio = s ** 2 / max(np.sum(s ** 2), 1e-300)
+        q = int(np.searchsorted(np.cumsum(ratio), self.variance - 1e-12) + 1)
+        q = max(1, min(max(q, self.min_components), n - 1, len(s)))
+        self.components_ = vt[:q]
+        self.explained_variance_ratio_ = ratio[:q]
+        return self
+
+    def _scaled(self, V):
+        n = len(V)
+        X = (V - self.mean_).reshape(n, len(self.scale_), self.n_basis) / self.scale_[:, None]
+        return X.reshape(n, -1)
+
+    def transform(self, W) -> np.ndarray:
+        """(n, q) coordinates of the demonstrations with weights W (n, D N)."""
+        return self._scaled(path_coordinates(W, self.n_basis)) @ self.components_.T
+
+
+def _log_densities(X, means, chols):
+    """log N(x_i; mu_k, Sigma_k) for every i, k, from the covariances' lower Cholesky factors."""
+    n, q = X.shape
+    out = np.empty((n, len(means)))
+    for k, (mu, L) in enumerate(zip(means, chols)):
+        sol = linalg.solve_triangular(L, (X - mu).T, lower=True, check_finite=False)
+        out[:, k] = -0.5 * (q * LOG_2PI + 2 * np.sum(np.log(np.diag(L)))
+                            + np.sum(sol ** 2, axis=0))
+    return out
+
+
+def _logsumexp_rows(lp):
+    top = lp.max(axis=1)
+    return top + np.log(np.exp(lp - top[:, None]).sum(axis=1))
+
+
+class PatternMixture:
+    """A Gaussian mixture in the pattern space, its covariances shrunk towards the covariance
+    pooled within the components: Sigma_k = (S_k + s S_pooled) / (n_k + s) with S_k the
+    responsibility-weighted scatter of component k, S_pooled = sum_k S_k / n and s =
+    ``prior_strength`` pseudo-demonstrations (regularised discriminant analysis, Friedman 1989:
+    with s = 0 every component has its own covariance, as s grows they share one). A floor of
+    ``floor`` times each coordinate's variance keeps them positive definite.
+
+    EM from k-means++ starts (core.kmeans), ``n_init`` of them, the one with the
+    highest log-likelihood kept; or from given responsibilities (``fit(X, resp=...)``). EM stops
+    when the log-likelihood gains less than ``tol`` relative or after ``max_iter`` iterations.
+    Fitted: ``weights_`` (K,), ``means_`` (K, q), ``covariances_`` (K, q, q), ``resp_`` (n, K),
+    ``log_likelihood_`` (of the training data, under the fitted model), ``n_iter_``.
+    """
+
+    def __init__(self, n_components: int, prior_strength: float = 10.0, floor: float = 1e-6,
+                 n_init: int = 10, random_state=0, max_iter: int = 200, tol: float = 1e-9):
+        self.n_components = n_components
+        self.prior_strength = prior_strength
+        self.floor = floor
+        self.n_init = n_init
+        self.random_state = random_state
+        self.max_iter = max_iter
+        self.tol = tol
+
+    def fit(self, X, resp=None) -> 'PatternMixture':
+        X = np.asarray(X, dtype=float)
+        if X.ndim != 2 or not np.all(np.isfinite(X)):
+            raise ValueError(f'X must be a finite (n, q) array, got shape {X.shape}')
+        K = int(self.n_components)
+        if not 1 <= K <= len(X):
+            raise ValueError(f'n_components must be in 1..{len(X)}, got {self.n_components!r}')
+        self._floor = self.floor * np.maximum(X.var(axis=0), 1e-300)
+        if resp is not None:
+            starts = [np.asarray(resp, dtype=float)]
+        elif K == 1:
+            starts = [np.ones((len(X), 1))]
+        else:
+            rng = np.random.default_rng(self.random_state)
+            seeds = rng.integers(2 ** 31, size=self.n_init)
+            starts = [np.eye(K)[kmeans(X, K, random_state=int(s), n_init=1)] for s in seeds]
+        best = None
+        for R in starts:
+            result = self._em(X, R)
+            if best is None or result[0] > best[0]:
+                best = result
+        self.log_likelihood_, params, self.resp_, self.n_iter_ = best
+        self.weights_, self.means_, self.covariances_ = params
+        self._chols = [np.linalg.cholesky(c) for c in self.covariances_]
+        return self
+
+    def _m_step(self, X, R):
+        n, q = X.shape
+        nk = R.sum(axis=0) + 10 * np.finfo(float).eps
+        means = R.T @ X / nk[:, None]
+        scatter = np.empty((len(nk), q, q))
+        for k in range(len(nk)):
+            E = X - means[k]
+            scatter[k] = (R[:, k, None] * E).T @ E
+        pooled = scatter.sum(axis=0) / n
+        s = self.prior_strength
+        covs = (scatter + s * pooled) / (nk + s)[:, None, None]
+        covs[:, np.arange(q), np.arange(q)] += self._floor
+        return nk / n, means, 0.5 * (covs + covs.transpose(0, 2, 1))
+
+    def _em(self, X, R):
+        prev, it = -np.inf, 0
+        best = None
+        for it in range(1, self.max_iter + 1):
+            params = self._m_step(X, R)
+            chols = [np.linalg.cholesky(c) for c in params[2]]
+            lp = np.log(params[0]) + _log_densities(X, params[1], chols)
+            norm = _logsumexp_rows(lp)
+            ll = float(norm.sum())
+            if best is None or ll > best[0]:
+                best = (ll, params, R, it)
+            R = np.exp(lp - norm[:, None])
+            if ll - prev <= self.tol * max(1.0, abs(ll)):
+                break
+            prev = ll
+        return best
+
+    def score_samples(self, X) -> np.ndarray:
+        """log p(x_i) under the mixture, (n,)."""
+        X = np.asarray(X, dtype=float)
+        return _logsumexp_rows(np.log(self.weights_)
+                               + _log_densities(X, self.means_, self._chols))
+
+    def predict(self, X) -> np.ndarray:
+        X = np.asarray(X, dtype=float)
+        return np.argmax(np.log(self.weights_) + _log_densities(X, self.means_, self._chols),
+                         axis=1)
+
+
+class HeldOut(NamedTuple):
+    """Leave-one-out scores of :func:`heldout_curve`, each (len(candidates), n)."""
+
+    loglik: np.ndarray      # log p_K(x_i) of each held-out demonstration
+    robust: np.ndarray      # log((1 - eps) p_K(x_i) + eps p_1(x_i)), eps = 1 / n
+
+
+def heldout_curve(X, candidates, prior_strength: float = 10.0, n_init: int = 10,
+                  random_state=0) -> HeldOut:
+    """Leave-one-out log-likelihood of every demonstration (rows of X, pattern-space
+    coordinates) under a :class:`PatternMixture` of K components fitted to the others, for
+    every K in ``candidates``. Each held-out fit starts from the responsibilities the mixture
+    of all demonstrations gives the others (one EM run instead of ``n_init``); the space
+    itself is fitted once, without labels, and is the same for every K.
+
+    ``robust``: the same with each held-out demonstration allowed, with probability eps = 1/n,
+    to be none of the patterns, scored then by the single Gaussian of the others (K = 1).
+    A recording that fits no pattern (a tracker that lost the person, an interaction cut
+    half-way) is a few hundred times less likely under every pattern than under one broad
+    Gaussian; scored plainly, that one recording outweighs the gain of every other and the
+    curve prefers K = 1. With eps = 1/n it costs at most log n nats. Higher is better."""
+    X = np.asarray(X, dtype=float)
+    n = len(X)
+    out = np.empty((len(candidates), n))
+    single = np.empty(n)
+    for a, K in enumerate([1, *candidates]):
+        if not 1 <= K <= n - 1:
+            raise ValueError(f'leave-one-out of {n} demonstrations cannot fit K = {K}')
+        whole = PatternMixture(K, prior_strength, n_init=n_init,
+                               random_state=random_state).fit(X)
+        scores = single if a == 0 else out[a - 1]
+        for i in range(n):
+            keep = np.arange(n) != i
+            model = PatternMixture(K, prior_strength).fit(X[keep], resp=whole.resp_[keep])
+            scores[i] = model.score_samples(X[i:i + 1])[0]
+    eps = 1.0 / n
+    return HeldOut(out, np.logaddexp(np.log1p(-eps) + out, np.log(eps) + single))

@@ -1,0 +1,386 @@
+"""How many components, and how much covariance floor: held-out criteria of the Mixture of
+Interaction ProMPs, computed from cross-validated fits through the estimator's public methods.
+
+- the thesis's leave-one-out RMS of the controlled agent (Figs. 8 and 10),
+  :func:`loo_rms_by_components`, given the final observed position or the whole path;
+- the held-out log-likelihood of whole demonstrations, the completion of a held-out
+  demonstration from its beginning and the controlled agent's held-out RMS, each K at the
+  covariance floor the criterion prefers (:func:`calibrated_heldout_curves`), what training
+  calibrates the floor with;
+- the plateau rule that reads a curve (:func:`selection_curve`).
+What each demonstration contributes on its own is computed once (MixtureIProMP.prepare) and
+every fold takes its part (Prepared.take).
+"""
+
+import inspect
+from typing import NamedTuple
+
+import numpy as np
+
+from .basis import GaussianBasis
+from .demonstration import Demonstration
+from .interaction import trajectory_distribution
+from .mixture import (COMPLETION_FRACTIONS, PRIOR_SCALES, MixtureIProMP, Prepared,
+                      _logsumexp_rows, beginning_stats, checked_fractions)
+from .phase import alpha_log_density
+from .promp import ObservationStats, log_evidence, observation_stats, stack_stats
+
+
+def loo_rms_by_components(demonstrations, candidates, observe: str = 'final', progress=None,
+                          **params):
+    """Leave-one-out RMS error of the controlled agent's predicted mean trajectory (thesis Figs.
+    8 and 10) for every K in ``candidates``. The held-out demonstration is observed at its final
+    observed position (``observe='final'``, as in the thesis) or along its whole path ('full').
+    ``progress(done, total, K)`` is called after each fit. Needs a controlled agent (for a
+    single-agent set use the held-out log-likelihood of :func:`calibrated_heldout_curves`).
+
+    Every fold's model is the one ``MixtureIProMP(K, **params).fit`` learns from the other
+    demonstrations; what each demonstration contributes on its own (statistics, eq. 14
+    weights) is computed once for all folds.
+
+    Returns an array (len(candidates), n) of per-demonstration RMS errors.
+    """
+    demos = list(demonstrations)
+    if demos and demos[0].n_controlled_dofs == 0:
+        raise ValueError('leave-one-out RMS of the controlled agent needs a controlled agent; '
+                         'these demonstrations have none (use the held-out log-likelihood)')
+    data = prepare_for_cv(demos, params)
+    final = (_final_views(GaussianBasis(params.get('n_basis', _DEFAULT_N_BASIS)), demos)
+             if observe == 'final' else None)
+    out = np.empty((len(candidates), len(demos)))
+    everyone = np.arange(len(demos))
+    for a, K in enumerate(candidates):
+        for i, test in enumerate(demos):
+            model = MixtureIProMP(n_components=K, **params).fit(data.take(everyone != i))
+            out[a, i] = (_final_rms(model, final, [i])[0] if final is not None
+                         else controlled_rms(model, test, observe))
+            if progress:
+                progress(a * len(demos) + i + 1, out.size, K)
+    return out
+
+
+def prepare_for_cv(demos, params) -> Prepared:
+    """Every demonstration prepared once (checked as ``fit`` checks them) for fits with
+    MixtureIProMP configuration ``params``."""
+    return MixtureIProMP(**{**params, 'n_components': 1}).prepare(demos)
+
+
+def controlled_rms(model, demo: Demonstration, observe: str = 'final'):
+    """RMS error of the predicted controlled trajectory of ``demo`` over its own samples."""
+    z = demo.phase
+    rows = np.flatnonzero(~np.isnan(demo.observed).any(axis=1))
+    if observe == 'final':
+        rows = rows[-1:]
+    elif observe != 'full':
+        raise ValueError(f"observe must be 'final' or 'full', got {observe!r}")
+    k, mean, _ = model.condition(z[rows], demo.observed[rows])
+    dofs = range(model.n_observed_, model.n_observed_ + model.n_controlled_)
+    pred = trajectory_distribution(mean, None, model.basis_, z, dofs=dofs)['position']
+    ok = ~np.isnan(demo.controlled).any(axis=1)
+    return float(np.sqrt(np.mean((pred[ok] - demo.controlled[ok]) ** 2)))
+
+
+class _FinalView(NamedTuple):
+    """What :func:`controlled_rms` (observe='final') needs of each demonstration, whatever model
+    it is scored under: the basis at its final observed sample ``phi`` (n, N) and that sample
+    ``y`` (n, P); per demonstration the basis at its samples with the controlled agent observed
+    ``psi`` and those samples ``yc``. Cross-validation computes it once for every fold."""
+
+    phi: np.ndarray
+    y: np.ndarray
+    psi: list
+    yc: list
+
+
+def _final_views(basis, demos) -> _FinalView:
+    rows = [np.flatnonzero(~np.isnan(d.observed).any(axis=1))[-1] for d in demos]
+    ok = [~np.isnan(d.controlled).any(axis=1) for d in demos]
+    return _FinalView(basis(np.array([d.phase[r] for d, r in zip(demos, rows)])),
+                      np.array([d.observed[r] for d, r in zip(demos, rows)]),
+                      [basis(d.phase[m]) for d, m in zip(demos, ok)],
+                      [d.controlled[m] for d, m in zip(demos, ok)])
+
+
+def _final_rms(model, view: _FinalView, idx) -> np.ndarray:
+    """:func:`controlled_rms` (observe='final') of the demonstrations ``idx`` of ``view`` at
+    once: one observation, so the Kalman form of eq. 4 (a P x P innovation per component)
+    gives the evidence of eq. 11 and the conditional mean of eq. 13 directly."""
+    idx = np.asarray(idx)
+    P, N = model.n_observed_, model.n_basis
+    do, K = P * N, model.n_components
+    phi, y = view.phi[idx], view.y[idx]                                    # (m, N), (m, P)
+    mu, cov = model.means_, model.covariances_
+    hm = np.einsum('kpn,in->ikp', mu[:, :do].reshape(K, P, N), phi)        # H mu, (m, K, P)
+    SH = np.einsum('kdpn,in->ikdp', cov[:, :, :do].reshape(K, -1, P, N), phi)  # Sigma H^T
+    S = np.einsum('ikpnq,in->ikpq', SH[:, :, :do].reshape(len(idx), K, P, N, P), phi)
+    nv = model.observed_noise_var_
+    S = S + (np.eye(P) * nv[..., None, :])                       # (P,) tied or (K, P) each
+    r = y[:, None, :] - hm
+    chol = np.linalg.cholesky(S)
+    u = np.linalg.solve(chol, r[..., None])[..., 0]
+    logdet = 2 * np.log(np.diagonal(chol, axis1=-2, axis2=-1)).sum(axis=-1)
+    lp = np.log(model.weights_) - 0.5 * ((u ** 2).sum(axis=-1) + logdet)
+    k = np.argmax(lp, axis=1)
+    m = np.arange(len(idx))
+    gain = np.linalg.solve(S[m, k], r[m, k][..., None])[..., 0]            # S^-1 (y - H mu)
+    mean = mu[k] + np.einsum('idp,ip->id', SH[m, k], gain)
+    out = np.empty(len(idx))
+    for j, i in enumerate(idx):
+        pred = view.psi[i] @ mean[j, do:].reshape(-1, N).T
+        out[j] = np.sqrt(np.mean((pred - view.yc[i]) ** 2)) if len(pred) else np.nan
+    return out
+
+
+def score_completion(model, demonstrations, fractions=None):
+    """How well ``model`` (a fitted MixtureIProMP) predicts the rest of each demonstration from its beginning, the
+    phase known (z = t / T, so alpha = 1/T too), for every ``fraction`` f (default
+    COMPLETION_FRACTIONS): the beginning B is the samples at z <= f, the rest R those at
+    z > f, every DOF of both agents. Returns (log_density, rms), each (n, len(fractions)):
+
+    - log p(R | B, alpha) = log p(R, B, alpha) - log p(B, alpha) under the mixture (eq. 6
+      with eq. 21 and p(alpha | k)): the predictive density of the rest, each component
+      weighted by its posterior given the beginning (eq. 11);
+    - the RMS error of the rest predicted as the thesis predicts (eqs. 12-13): the most
+      probable component given B and alpha, conditioned on B, its mean at the rest's
+      phases; over every DOF of the rest in the DOF's own unit (comparable across K, not
+      across data sets).
+    """
+    model._check_fitted()
+    fractions = checked_fractions(COMPLETION_FRACTIONS if fractions is None else fractions)
+    demos = list(demonstrations)
+    D = model.n_observed_ + model.n_controlled_
+    for demo in demos:
+        if demo.n_observed_dofs + demo.n_controlled_dofs != D:
+            raise ValueError(f'demonstration {demo.name!r} has {demo.n_observed_dofs} + '
+                             f'{demo.n_controlled_dofs} DOFs; the model has '
+                             f'{model.n_observed_} + {model.n_controlled_}')
+    full = stack_stats([observation_stats(model.basis_, d.phase,
+                                          np.hstack([d.observed, d.controlled]))
+                        for d in demos])
+    return completion_statistics(model, full, beginning_stats(model.basis_, demos, fractions),
+                                  np.array([1.0 / d.duration for d in demos]))
+
+def completion_statistics(model, full: ObservationStats, beginnings, alphas):
+    """The :func:`score_completion` of stacked statistics of the whole demonstrations, of
+    their beginnings (one stack per fraction) and their alpha = 1/T."""
+    K, D = model.n_components, model.n_observed_ + model.n_controlled_
+    N = model.n_basis
+    n = len(alphas)
+    noise = np.broadcast_to(model.noise_var_, (K, D))
+    prior = np.log(model.weights_) + alpha_log_density(alphas, model.alpha_mean_,
+                                                      model.alpha_std_ ** 2)
+    whole = prior + np.column_stack([log_evidence(full, model.means_[k], model.covariances_[k],
+                                                  noise[k]) for k in range(K)])
+    log_whole = _logsumexp_rows(whole)
+    density = np.empty((n, len(beginnings)))
+    rms = np.empty((n, len(beginnings)))
+    for c, begin in enumerate(beginnings):
+        lp = prior.copy()
+        post = np.empty((K, n, D * N))
+        for k in range(K):
+            ll, post[k] = log_evidence(begin, model.means_[k], model.covariances_[k], noise[k],
+                                       posterior_means=True)
+            lp[:, k] += ll                                                  # eq. 11
+        density[:, c] = log_whole - _logsumexp_rows(lp)
+        w = post[np.argmax(lp, axis=1), np.arange(n)].reshape(n, D, N)     # eqs. 12-13
+        # The rest's statistics are the whole's minus the beginning's (sums over samples).
+        G, b = full.G - begin.G, full.b - begin.b
+        sq = (full.yy - begin.yy - 2 * np.einsum('ijn,ijn->ij', w, b)
+              + np.einsum('ijn,ijnk,ijk->ij', w, G, w))
+        m = (full.m - begin.m).sum(axis=1)
+        rms[:, c] = np.sqrt(np.maximum(sq.sum(axis=1), 0.0) / np.maximum(m, 1.0))
+    return density, rms
+
+
+def cv_folds(n: int, n_folds: int, random_state=0):
+    """Fold index (n,) of each demonstration: a seeded permutation cut into ``n_folds`` parts."""
+    n_folds = int(min(n_folds, n))
+    if n_folds < 2:
+        raise ValueError(f'cross-validation needs at least 2 demonstrations, got {n}')
+    order = np.random.default_rng(random_state).permutation(n)
+    fold = np.empty(n, dtype=int)
+    fold[order] = np.arange(n) % n_folds
+    return fold
+
+
+def _heldout_scores(demonstrations, candidates, scales, n_folds, progress, fold_seed, params,
+                    fractions=(), controlled=False):
+    """Held-out scores, each (len(scales), len(candidates), n): every fold's model is the one
+    ``MixtureIProMP(K, prior_scale=scale, **params).fit`` learns from the other folds, scored
+    on the fold. 'loglik': :meth:`MixtureIProMP.score_demonstrations`; with ``fractions`` also
+    'completion' and 'completion_rms', :func:`score_completion`'s two scores
+    averaged over the fractions. What each demonstration contributes on its own is computed
+    once, and each fold's k-means start of each K once for every scale (it does not depend on
+    the floor). With ``controlled`` and a controlled agent, also 'controlled_rms':
+    :func:`controlled_rms` of the held-out demonstration given its final observed position (NaN
+    for one whose controlled agent is never observed). ``progress(done, total, K)`` after each
+    fit."""
+    demos = list(demonstrations)
+    fold = cv_folds(len(demos), n_folds, fold_seed)
+    data = prepare_for_cv(demos, params)
+    shape = (len(scales), len(candidates), len(demos))
+    out = {'loglik': np.empty(shape)}
+    basis = GaussianBasis(params.get('n_basis', _DEFAULT_N_BASIS))
+    if controlled and demos[0].n_controlled_dofs:
+        out['controlled_rms'] = np.empty(shape)
+        final = _final_views(basis, demos)
+    if fractions:
+        out['completion'], out['completion_rms'] = np.empty(shape), np.empty(shape)
+        beginnings = beginning_stats(basis, demos, checked_fractions(fractions))
+    done, total = 0, len(scales) * len(candidates) * (fold.max() + 1)
+    for f in range(fold.max() + 1):
+        train = data.take(fold != f)
+        test = np.flatnonzero(fold == f)
+        test_stats = data.take(test).stats
+        for a, K in enumerate(candidates):
+            init = None
+            for b, scale in enumerate(scales):
+                model = MixtureIProMP(n_components=K, **{**params, 'prior_scale': scale})
+                if init is None and len(train.W) >= K:
+                    init = model.initial_clusters(train)
+                model.fit(train, init=init)
+                out['loglik'][b, a, test] = model.score_statistics(test_stats, data.alphas[test])
+                if 'controlled_rms' in out:
+                    out['controlled_rms'][b, a, test] = _final_rms(model, final, test)
+                if fractions:
+                    density, rms = completion_statistics(model, 
+                        test_stats, [st.take(test) for st in beginnings],
+                        data.alphas[test])
+                    out['completion'][b, a, test] = density.mean(axis=1)
+                    out['completion_rms'][b, a, test] = rms.mean(axis=1)
+                done += 1
+                if progress:
+                    progress(done, total, K)
+    return out
+
+
+_DEFAULT_N_BASIS = inspect.signature(MixtureIProMP).parameters['n_basis'].default
+
+
+def calibrated_heldout_curves(demonstrations, candidates, fractions=COMPLETION_FRACTIONS,
+                              prior_scales=PRIOR_SCALES, n_folds: int = 5, progress=None,
+                              fold_seed=0, controlled: bool = True, **params):
+    """Every held-out criterion for K from the same cross-validated fits, each K at the
+    covariance floor the criterion itself prefers.
+
+    The floor is the variance a component gets in the directions its few members do not span
+    (fewer demonstrations than weights). Too small, and a held-out demonstration of the same
+    pattern falls outside the component; too large, and the components blur into each other.
+    The right amount depends on the data (smooth generated reaches want 1e-3 of the within-
+    pattern variance, sampled covariances and letters 0.3 to 3), so no fixed value is right
+    for every data set. The same folds for every floor and K; the maximum over a few floors
+    makes every K's curve equally optimistic, so the paired comparison between K stays fair.
+    The criteria:
+
+    - 'loglik': log p(D_i, alpha_i) of the held-out demonstration (higher is better);
+    - with ``controlled`` (default) and a controlled agent, 'controlled_rms': the thesis's
+      leave-one-out criterion (:func:`controlled_rms`, the controlled agent predicted from the
+      final observed position) on the held-out folds, lower is better. Its floor is the one
+      with the lowest RMS among the floors whose held-out likelihood is not significantly
+      below the likelihood's own choice (paired differences within two standard errors): a
+      floor that predicts the robot best without misdescribing the observed agent, which the
+      online component posterior and the novelty test read. The RMS alone barely moves below
+      some floor, so its minimum there is noise at the grid's edge; the likelihood alone can
+      prefer a floor that predicts the robot's posture worse than a floor it cannot tell
+      apart (the Panda's box assembly at K = 4: 1.0 against 0.316).
+    - with ``fractions``, the single-agent analogue of the thesis's leave-one-out of the
+      controlled agent, what a model of one agent's movements is used for (recognise a
+      movement and predict its rest from its beginning): 'completion', the predictive log
+      density of the rest given the beginning, log p(D_i[z > f] | D_i[z <= f], alpha_i),
+      and 'completion_rms', the RMS error of the rest predicted from the beginning (lower is
+      better), each averaged over the fractions f (:func:`score_completion`).
+
+    Returns {criterion: {'scores' (len(candidates), n): each K's per-demonstration score at
+    its floor, 'prior_scale': the floor per candidate, 'prior_scales' and 'mean_by_scale'
+    (len(prior_scales), len(candidates)): the mean of every curve tried}}.
+    """
+    demos = list(demonstrations)
+    scales = [float(s) for s in prior_scales]
+    if not scales or not all(np.isfinite(s) and s > 0 for s in scales):
+        raise ValueError(f'prior_scales must be positive numbers, got {prior_scales!r}')
+    params = {k: v for k, v in params.items() if k != 'prior_scale'}
+    scores = _heldout_scores(demos, candidates, scales, n_folds, progress, fold_seed, params,
+                             tuple(fractions), controlled)
+    out = {}
+    for name, S in scores.items():
+        if name == 'controlled_rms':
+            mean = np.nanmean(S, axis=2)
+            allowed = np.column_stack([_not_significantly_worse(scores['loglik'][:, a])
+                                       for a in range(len(candidates))])
+            best = np.argmin(np.where(allowed, mean, np.inf), axis=0)
+        else:
+            mean = S.mean(axis=2)
+            best = (np.argmin(mean, axis=0) if name.endswith('_rms')
+                    else np.argmax(mean, axis=0))
+        out[name] = {'scores': S[best, np.arange(len(candidates))],
+                     'prior_scale': [scales[b] for b in best], 'prior_scales': scales,
+                     'mean_by_scale': mean}
+    return out
+
+
+def _not_significantly_worse(g):
+    """Mask of the rows of ``g`` (options, n; per-demonstration scores, higher is better) whose
+    paired difference to the best row is within two standard errors: the options the data
+    cannot tell from the best."""
+    d = g[np.argmax(g.mean(axis=1))] - g
+    n = g.shape[1]
+    se = d.std(axis=1, ddof=1) / np.sqrt(n) if n > 1 else np.zeros(len(g))
+    return d.mean(axis=1) <= 2 * se
+
+
+def select_n_components(scores, higher_is_better: bool = False, paired: bool = False):
+    """Smallest K (index into the candidates) whose mean score is within one standard error of
+    the best: where the curve reaches its plateau (LOO RMS, lower is better; or held-out
+    log-likelihood, ``higher_is_better``). See :func:`selection_curve` for ``paired``."""
+    return selection_curve(scores, higher_is_better, paired)['index']
+
+
+def selection_curve(scores, higher_is_better: bool = False, paired: bool = False):
+    """The K choice and its evidence from per-demonstration scores (candidates, n).
+
+    Plateau rule: the smallest K within one standard error of the best K's scores (the
+    thesis's RMS curves) or, ``paired``, the smallest K not significantly worse than the best:
+    its per-demonstration difference to the best K within two standard errors. Held-out
+    log-likelihoods need the paired form: each demonstration's own level (its number of
+    samples, its noise) varies far more between demonstrations than between K, while the
+    paired differences are so consistent that one standard error would call a negligible
+    gain of a superfluous component significant.
+
+    Whether the curve has a clear optimum (paired differences, two standard errors): the chosen
+    K beats the first candidate, or the first candidate is chosen and beats every other.
+    Otherwise the curve is flat within its noise and the note says so.
+    Returns a dict: index, mean, se (per candidate), clear (bool), note (str).
+    """
+    s = np.asarray(scores, dtype=float)
+    g = s if higher_is_better else -s               # higher is better from here on
+    n = s.shape[1]
+
+    def se_of(x):
+        return float(x.std(ddof=1) / np.sqrt(n)) if n > 1 else 0.0
+    mean = s.mean(axis=1)
+    se = np.array([se_of(r) for r in s])
+    best = int(np.argmax(g.mean(axis=1)))
+    if paired:
+        within = _not_significantly_worse(g)
+    else:
+        within = g.mean(axis=1) >= g[best].mean() - se[best]
+    index = int(np.flatnonzero(within)[0])
+
+    def beats(a, b):
+        d = g[a] - g[b]
+        return d.mean() > 2 * se_of(d)
+    if len(s) == 1:
+        clear, note = False, 'a single candidate: nothing was compared'
+    elif index > 0:
+        clear = beats(index, 0)
+        note = ('clear: better than the first candidate by more than two paired standard errors'
+                if clear else 'no clear optimum: the curve is flat within two paired standard '
+                              'errors of the first candidate')
+    else:
+        clear = all(beats(0, b) for b in range(1, len(s)))
+        note = ('clear: the first candidate beats every other by more than two paired standard '
+                'errors' if clear else 'no clear optimum: the curve is flat (no candidate is '
+                'better than the first by two paired standard errors); the first is kept by '
+                'parsimony')
+    return {'index': index, 'mean': mean.tolist(), 'se': se.tolist(), 'clear': bool(clear),
+            'note': note}

@@ -1,0 +1,348 @@
+"""Two people's recorded interactions (NuiSI) with an arm in one person's place: the robot takes
+the partner's part.
+
+Everything is set in config/interactions.yaml (:func:`load_config`):
+
+- Frames. Each NuiSI person is in their own body frame (origin at the right collar, x toward the
+  other person, y left, z up). Where person 1 stood in the partner's (person 2's) frame is not in
+  the data; it is derived from it (:func:`derive_person1_to_partner`: in handshakes and fist
+  bumps the right hands touch) and stated in the config.
+- The arm in the partner's place (:class:`Scene`): the partner's right shoulder where the arm's
+  shoulder is, facing person 1 (robot.retarget.Placement), and the whole interaction scaled
+  about that shoulder by the reach scale of the training recordings' partner hands
+  (robot.retarget.reach_scale; 1 unless some are out of the arm's reach), so the two hands still
+  meet. Person 1's hand goes to the mocap frame ('world') through the same placement.
+- The partner's hand becomes the arm's joints (:func:`arm_interaction`): the tracker's glitches
+  found with hindsight (estimation.pose_check.plausible_track) are missing samples, never
+  targets; the path is low-passed and followed sample by sample within the arm's joint and
+  speed limits (robot.retarget.joint_path).
+- Person 1's hand is replayed as recorded, glitches included (the observer drops what it drops),
+  with the first plausible frame held ``rest_before`` s before it and the last ``rest_after`` s
+  after it: the recordings are cut at the interaction's start and stop, and the observer needs
+  rest before an onset and after an end. :func:`write_bags` writes these streams with the arm's
+  joints as rosbag2 bags: the nodes replay them, and training loads them (io.dataset) segmented
+  as the observer segments them, with this scenario's observer settings
+  (:func:`segmentation`), so training and the nodes share time zero.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from mixture_ip_ros.core.segmentation import MotionSegmenter
+from mixture_ip_ros.core.share import config_path
+from mixture_ip_ros.estimation.pose_check import plausible_track
+from mixture_ip_ros.robot import retarget
+from mixture_ip_ros.scenarios import nuisi
+from mixture_ip_ros.scenarios.folders import write_scenario_bags
+from mixture_ip_ros.scenarios.recording import GeneratedDemo
+
+CONFIG_FILE = 'interactions.yaml'
+SCENARIO = 'interactions'
+# The interactions in which the two right hands touch (waving has no contact).
+CONTACT = ('handshake', 'rocket_fistbump', 'parachute_fistbump')
+_SEGMENTER_SETTINGS = tuple(p for p in inspect.signature(MotionSegmenter).parameters)
+
+
+@dataclass(frozen=True)
+class InteractionsConfig:
+    """config/interactions.yaml, checked (see the file for what each value means)."""
+
+    source: str
+    data: str
+    person1_xyz: tuple
+    person1_yaw: float
+    partner_shoulder: tuple
+    partner_yaw: float
+    reach_margin: float
+    rest_before: float
+    rest_after: float
+    lowpass_hz: float
+    posture_weight: float
+    limit_margin: float
+    speed_fraction: float
+    observer: dict
+    estimator: dict
+
+
+def load_config(path=None) -> InteractionsConfig:
+    """The scenario's settings from ``path`` (default config/interactions.yaml); ValueError with
+    one line naming the file and the field for anything missing, unknown or out of range."""
+    path = Path(path) if path is not None else config_path(CONFIG_FILE)
+
+    def fail(message):
+        raise ValueError(f'{path}: {message}')
+
+    try:
+        data = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise ValueError(f'{path}: cannot read the interactions settings: '
+                         f'{" ".join(str(exc).split())}') from exc
+    if not isinstance(data, dict):
+        fail('the interactions settings are a YAML mapping (key: value lines)')
+    sections = {'person1_to_partner': ('xyz', 'yaw'), 'partner': ('shoulder', 'yaw')}
+    positive, fraction = ('> 0', lambda v: v > 0), ('in (0, 1]', lambda v: 0 < v <= 1)
+    at_least_0 = ('>= 0', lambda v: v >= 0)
+    scalars = {'reach_margin': fraction, 'rest_before': at_least_0, 'rest_after': at_least_0,
+               'lowpass_hz': positive, 'posture_weight': at_least_0,
+               'limit_margin': at_least_0, 'speed_fraction': fraction}
+    known = {'data', 'observer', 'estimator', *sections, *scalars}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        fail(f'unknown keys {unknown}; allowed: {sorted(known)}')
+    missing = sorted(known - {'observer', 'estimator'} - set(data))
+    if missing:
+        fail(f'missing keys {missing}')
+
+    def number(value, field, rule=('finite', lambda v: True)):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+                math.isfinite(value) and rule[1](value)):
+            fail(f'{field} must be a finite number {rule[0]}, got {value!r}')
+        return float(value)
+
+    def point(value, field):
+        if not isinstance(value, list) or len(value) != 3:
+            fail(f'{field} must be 3 numbers [x, y, z], got {value!r}')
+        return tuple(number(v, field) for v in value)
+
+    parsed = {}
+    for key, fields in sections.items():
+        section = data[key]
+        if not isinstance(section, dict) or set(section) != set(fields):
+            fail(f'{key} must be a mapping with exactly {list(fields)}, got {section!r}')
+        parsed[key] = (point(section[fields[0]], f'{key}.{fields[0]}'),
+                       number(section['yaw'], f'{key}.yaw'))
+    values = {k: number(data[k], k, rule) for k, rule in scalars.items()}
+    if data['data'] not in nuisi.VERSIONS:
+        fail(f'data must be a NuiSI version {sorted(nuisi.VERSIONS)}, got {data["data"]!r}')
+    observer = data.get('observer') or {}
+    if not isinstance(observer, dict):
+        fail(f'observer must be a mapping of segmentation settings, got {observer!r}')
+    bad = sorted(set(observer) - set(_SEGMENTER_SETTINGS))
+    if bad:
+        fail(f'observer: unknown settings {bad}; allowed: {list(_SEGMENTER_SETTINGS)}')
+    try:
+        MotionSegmenter(**observer)
+    except (TypeError, ValueError) as exc:
+        fail(f'observer: {exc}')
+    estimator = data.get('estimator') or {}
+    if not isinstance(estimator, dict) or set(estimator) - {'lookahead'}:
+        fail(f'estimator: only lookahead is set here, got {estimator!r}')
+    if 'lookahead' in estimator:
+        estimator = {'lookahead': number(estimator['lookahead'], 'estimator.lookahead',
+                                         ('in (0, 10]', lambda v: 0 < v <= 10))}
+    if values['rest_after'] < observer.get('end_hold', _default_end_hold()):
+        fail(f'rest_after ({values["rest_after"]} s) must be at least observer.end_hold: the '
+             'observer needs that much rest to see the end')
+    return InteractionsConfig(
+        source=str(path), data=data['data'], person1_xyz=parsed['person1_to_partner'][0],
+        person1_yaw=parsed['person1_to_partner'][1], partner_shoulder=parsed['partner'][0],
+        partner_yaw=parsed['partner'][1], observer=dict(observer), estimator=estimator,
+        **values)
+
+
+def _default_end_hold() -> float:
+    return inspect.signature(MotionSegmenter).parameters['end_hold'].default
+
+
+def segmentation(config: InteractionsConfig) -> dict:
+    """The observer's movement segmentation settings of this scenario (observer_node
+    parameters, and the keyword arguments io.dataset's loading passes to segment_motion)."""
+    return dict(config.observer)
+
+
+def estimator_settings(config: InteractionsConfig) -> dict:
+    """The estimator_node parameters this scenario sets."""
+    return dict(config.estimator)
+
+
+# ------------------------------------------------------------------------------ frames
+
+def _yaw(angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _hands(recording, person: int, version: str) -> tuple:
+    """(the right hand (n, 3) of person 1 or 2, the mask of samples a hand can have made)."""
+    v = nuisi.VERSIONS[version]
+    hand = (recording.person1 if person == 1 else recording.person2)[:, v.joints.index(v.hand)]
+    return hand, plausible_track(recording.t, hand)
+
+
+def derive_person1_to_partner(recordings, version: str = 'v2', yaw: float = math.pi,
+                              iterations: int = 50):
+    """Person 1's body frame in the partner's from where their right hands touch: the xyz of
+    p_partner = Rz(yaw) p_1 + xyz that makes, on average over the recordings of interactions
+    with contact (CONTACT), the hands' closest approach vanish. Starting from the frames where
+    both hands reach farthest forward, each round takes per recording the frame of closest
+    approach under the current xyz and sets xyz to the mean of the differences there, until the
+    frames repeat. Samples a hand cannot have made (tracker glitches) are left out.
+    Returns (xyz (3,), the closest approach per recording (m))."""
+    R = _yaw(yaw)
+    pairs = []
+    for r in recordings:
+        if r.label not in CONTACT:
+            continue
+        (h1, ok1), (h2, ok2) = _hands(r, 1, version), _hands(r, 2, version)
+        ok = ok1 & ok2
+        pairs.append((h1[ok] @ R.T, h2[ok]))
+    if not pairs:
+        raise ValueError(f'no recording of an interaction with contact {CONTACT}')
+    frames = [int(np.argmax(h2[:, 0] - h1[:, 0])) for h1, h2 in pairs]
+    for _ in range(iterations):
+        xyz = np.mean([h2[i] - h1[i] for (h1, h2), i in zip(pairs, frames)], axis=0)
+        new = [int(np.argmin(np.linalg.norm(h2 - h1 - xyz, axis=1))) for h1, h2 in pairs]
+        if new == frames:
+            break
+        frames = new
+    gaps = np.array([np.linalg.norm(h2[i] - h1[i] - xyz) for (h1, h2), i in zip(pairs, frames)])
+    return xyz, gaps
+
+
+def derive_partner_shoulder(recordings, version: str = 'v2') -> np.ndarray:
+    """The partner's right shoulder in their body frame: the median over every sample."""
+    j = nuisi.VERSIONS[version].joints.index('right_shoulder')
+    return np.median(np.concatenate([r.person2[:, j] for r in recordings]), axis=0)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """One arm in the partner's place: ``placement`` maps the partner's body frame into the
+    robot's base frame (scale included); person 1 goes there through their place in the
+    partner's frame, and on to the mocap frame through the robot's mount."""
+
+    config: InteractionsConfig
+    kin: object
+    placement: retarget.Placement
+
+    @property
+    def robot(self):
+        return self.kin.description
+
+    def partner_to_base(self, points) -> np.ndarray:
+        return self.placement.apply(points)
+
+    def person1_to_base(self, points) -> np.ndarray:
+        p = np.asarray(points, dtype=float) @ _yaw(self.config.person1_yaw).T
+        return self.placement.apply(p + np.asarray(self.config.person1_xyz))
+
+    def person1_to_world(self, points) -> np.ndarray:
+        return self.robot.base_to_world().apply_array(self.person1_to_base(points))
+
+    def person1_pose(self) -> tuple:
+        """Where person 1 stands in the mocap frame: their body frame's origin (3,) and the
+        yaw of its x axis (rad)."""
+        origin = self.person1_to_world(np.zeros((1, 3)))[0]
+        forward = self.person1_to_world(np.array([[1.0, 0.0, 0.0]]))[0] - origin
+        return origin, math.atan2(forward[1], forward[0])
+
+
+def scene(robot=None, config: InteractionsConfig = None, train=None) -> Scene:
+    """The arm ``robot`` (a shipped name, a description file or a RobotKinematics) in the
+    partner's place, scaled for the partner hands of ``train`` (default: the training split)."""
+    from mixture_ip_ros.robot.kinematics import RobotKinematics
+    config = config or load_config()
+    kin = robot if isinstance(robot, RobotKinematics) else RobotKinematics(robot)
+    train = nuisi.recordings(config.data, 'train') if train is None else train
+    unscaled = retarget.Placement(config.partner_shoulder, tuple(retarget.shoulder(kin)),
+                                  config.partner_yaw)
+    hands = np.concatenate([h[ok] for h, ok in (_hands(r, 2, config.data) for r in train)])
+    scale = retarget.reach_scale(kin, unscaled.offsets(hands), config.reach_margin)
+    return Scene(config, kin, retarget.Placement(unscaled.body_shoulder, unscaled.arm_shoulder,
+                                                 unscaled.yaw, scale))
+
+
+# ------------------------------------------------------------------------------ replays
+
+def _held(values, first: int, last: int, before: int, after: int) -> np.ndarray:
+    """``values`` (n, 3) with row ``first`` repeated ``before`` times ahead and row ``last``
+    ``after`` times behind."""
+    return np.vstack([np.repeat(values[first:first + 1], before, axis=0), values,
+                      np.repeat(values[last:last + 1], after, axis=0)])
+
+
+def replay_frames(recording, config: InteractionsConfig) -> tuple:
+    """(samples held before, samples held after) at the recording's rate."""
+    return (int(round(config.rest_before * recording.rate)),
+            int(round(config.rest_after * recording.rate)))
+
+
+def partner_hand(recording, scene: Scene) -> tuple:
+    """Where the partner's hand was, in the base frame, on the replay's time base: (t (n,) s
+    from the replay's start, xyz (n, 3), NaN where the tracker had lost the hand), its first
+    and last position held through the rests."""
+    hand, ok = _hands(recording, 2, scene.config.data)
+    before, after = replay_frames(recording, scene.config)
+    idx = np.flatnonzero(ok)
+    xyz = _held(np.where(ok[:, None], hand, np.nan), idx[0], idx[-1], before, after)
+    return np.arange(len(xyz)) / recording.rate, scene.partner_to_base(xyz)
+
+
+def person1_stream(recording, scene: Scene) -> tuple:
+    """Person 1's hand as replayed to the nodes: (t (n,) s, xyz (n, 3) in the mocap frame): the
+    recording as it is, glitches included, with the first and last samples a hand can have made
+    (estimation.pose_check.plausible_track) held through the rests before and after."""
+    hand, ok = _hands(recording, 1, scene.config.data)
+    before, after = replay_frames(recording, scene.config)
+    idx = np.flatnonzero(ok)
+    xyz = _held(hand, idx[0], idx[-1], before, after)
+    return np.arange(len(xyz)) / recording.rate, scene.person1_to_world(xyz)
+
+
+def _lowpass(xyz: np.ndarray, rate: float, cutoff: float) -> np.ndarray:
+    """A path (n, 3) low-passed at ``cutoff`` Hz (second-order Butterworth, forward and back:
+    no lag); NaN rows (the tracker's glitches) are bridged linearly between the valid samples
+    first, so the glitch positions are never targets."""
+    from scipy.signal import butter, filtfilt
+    ok = ~np.isnan(xyz).any(axis=1)
+    idx = np.arange(len(xyz))
+    filled = np.column_stack([np.interp(idx, idx[ok], xyz[ok, j]) for j in range(3)])
+    if cutoff >= rate / 2 or len(xyz) < 10:
+        return filled
+    b, a = butter(2, cutoff / (rate / 2))
+    return filtfilt(b, a, filled, axis=0)
+
+
+def arm_interaction(recording, scene: Scene) -> GeneratedDemo:
+    """One recording with the arm in the partner's place, on the replay's time base: person 1's
+    stream (mocap frame) and the arm's joints following the partner's hand (low-passed) within
+    ``speed_fraction`` of the arm's speed limits (robot.retarget.joint_path).
+    ``onset``/``end`` are the recording's first and last frames; ``extra`` holds the partner's
+    hand in the base frame ('partner', NaN where the tracker lost it) and the flange's distance
+    from it ('lag', m: the arm's lag where the hand is faster, and what is out of reach)."""
+    config, kin = scene.config, scene.kin
+    t, person1 = person1_stream(recording, scene)
+    _, partner = partner_hand(recording, scene)
+    path = retarget.joint_path(kin, _lowpass(partner, recording.rate, config.lowpass_hz),
+                               1.0 / recording.rate, kin.description.home_array(),
+                               speed_limit=config.speed_fraction * kin.velocity_limit,
+                               posture_weight=config.posture_weight,
+                               limit_margin=config.limit_margin)
+    q = path.q
+    before, _ = replay_frames(recording, config)
+    last = np.flatnonzero(~np.isnan(partner).any(axis=1))[-1]
+    return GeneratedDemo(
+        name=recording.name, label=recording.label, wrist_t=t, wrist_xyz=person1, joint_t=t,
+        joint_q=q, joint_qd=np.gradient(q, t, axis=0), onset=float(t[before]),
+        end=float(t[before + len(recording.t) - 1]), wrist_goal=person1[-1],
+        flange_goal=partner[last], robot=kin.description,
+        extra={'partner': partner, 'lag': np.linalg.norm(kin.fk_positions(q) - partner, axis=1)})
+
+
+def write_bags(scene: Scene, split: str, out_dir, recordings=None,
+               storage: str = 'mcap') -> list:
+    """One bag per recording of ``split`` (person 1's stream on /mocap/wrist in 'world', the
+    arm's joints on /joint_states) and labels.json into ``out_dir`` (which must not exist or be
+    empty); returns the arm interactions written."""
+    recordings = (nuisi.recordings(scene.config.data, split) if recordings is None
+                  else recordings)
+    made = [arm_interaction(r, scene) for r in recordings]
+    write_scenario_bags(SCENARIO, out_dir, demos=made, storage=storage)
+    return made

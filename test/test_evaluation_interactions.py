@@ -1,0 +1,107 @@
+"""`mixture-ip evaluate` on real interactions and on your own labelled recordings: patterns
+found without labels against the labels, online recognition and the partner predicted, each
+against baselines on the same folds."""
+
+import json
+
+import numpy as np
+import pytest
+
+from mixture_ip_ros.app.cli import main
+from mixture_ip_ros.app.evaluation.interactions import stratified_folds
+from mixture_ip_ros.core.demonstration import Layout
+from mixture_ip_ros.io.csv_files import write_csv_demonstration
+from mixture_ip_ros.scenarios.synthetic import mixture_demos
+
+from test_evaluation import assert_real_pngs
+
+KEYS = ('n_components_selected', 'ari', 'heldout_ari', 'recognition_accuracy_by_fraction',
+        'partner_rms_cm_by_fraction', 'partner_final_cm_by_fraction', 'baseline_kmeans_ari',
+        'baseline_gmm_pca_ari', 'baseline_nn_accuracy_by_fraction',
+        'baseline_nn_partner_rms_cm_by_fraction', 'single_partner_rms_cm_by_fraction',
+        'supervised_partner_rms_cm_by_fraction', 'supervised_accuracy_by_fraction')
+
+
+def test_folds_hold_every_label_in_proportion():
+    labels = np.repeat(['a', 'b', 'c'], [12, 10, 7])
+    fold = stratified_folds(labels, 5, seed=0)
+    for lbl in 'abc':
+        counts = np.bincount(fold[labels == lbl], minlength=5)
+        assert counts.max() - counts.min() <= 1
+    assert np.array_equal(fold, stratified_folds(labels, 5, seed=0))
+
+
+def _write(root, demos, layout):
+    (root / 'csv').mkdir()
+    labels = {}
+    for i, d in enumerate(demos):
+        write_csv_demonstration(root / 'csv' / f'rec_{i:02d}.csv', d, layout)
+        labels[f'rec_{i:02d}'] = str(d.label)
+    (root / 'labels.json').write_text(json.dumps(labels))
+
+
+def test_your_own_labelled_csv_recordings(tmp_path, capsys):
+    demos, labels, _, _ = mixture_demos(seed=3, n_obs=3, n_ctrl=3, n_basis=8)
+    for d, lbl in zip(demos, labels):
+        d.label = f'pattern_{lbl}'
+    layout = Layout(('hx', 'hy', 'hz'), ('px', 'py', 'pz'), ('m',) * 3, ('m',) * 3)
+    _write(tmp_path, demos, layout)
+    out = tmp_path / 'out'
+    assert main(['evaluate', '--csv', str(tmp_path / 'csv'), '--labels',
+                 str(tmp_path / 'labels.json'), '--observed', 'hx,hy,hz', '--controlled',
+                 'px,py,pz', '--observed-units', 'm', '--controlled-units', 'm', '--out',
+                 str(out), '--quick']) == 0
+    m = json.loads((out / 'metrics.json').read_text())
+    assert json.loads(capsys.readouterr().out) == m
+    assert all(k in m for k in KEYS)
+    assert m['n_components_selected'] == [3] * 5
+    assert m['ari'] == 1.0 and m['heldout_ari'] == 1.0 and m['baseline_kmeans_ari'] == 1.0
+    assert m['recognition_accuracy_by_fraction']['1'] == 1.0
+    assert set(m['partner_rms_cm_by_fraction']) == {'0.3', '0.5', '0.7', '1'}
+    assert m['partner_rms_cm_by_fraction']['1'] is None           # nothing left to predict
+    for f in ('0.3', '0.5', '0.7'):
+        assert m['partner_rms_cm_by_fraction'][f] < m['single_partner_rms_cm_by_fraction'][f]
+    assert_real_pngs(out, m['plots'])
+
+
+def test_bad_labels_are_one_line_errors(tmp_path, capsys):
+    demos, labels, _, _ = mixture_demos(seed=3, n_obs=1, n_ctrl=1, n_basis=8)
+    layout = Layout(('x',), ('y',))
+    for d, lbl in zip(demos, labels):
+        d.label = str(lbl)
+    _write(tmp_path, demos, layout)
+    (tmp_path / 'partial.json').write_text(json.dumps({'rec_00': 'a'}))
+    (tmp_path / 'list.json').write_text('[1, 2]')
+    for labels_file, message in (('partial.json', 'no label for'), ('list.json', 'JSON object'),
+                                 ('missing.json', 'not a readable JSON file')):
+        assert main(['evaluate', '--csv', str(tmp_path / 'csv'), '--labels',
+                     str(tmp_path / labels_file), '--observed', 'x', '--controlled', 'y',
+                     '--out', str(tmp_path / 'o')]) == 1
+        err = capsys.readouterr().err.strip()
+        assert message in err and len(err.splitlines()) == 1, err
+    assert main(['evaluate', '--scenario', 'pole', '--csv', str(tmp_path / 'csv'),
+                 '--out', str(tmp_path / 'o')]) == 1
+    assert 'one of them' in capsys.readouterr().err
+
+
+@pytest.fixture(scope='module')
+def nuisi_v2(tmp_path_factory):
+    from mixture_ip_ros.app.evaluation.interactions import evaluate_nuisi, interactions_config
+    from mixture_ip_ros.io.cache import cache_dir
+    from mixture_ip_ros.scenarios import nuisi
+    if not (cache_dir() / 'nuisi' / nuisi.VERSIONS['v2'].file).is_file():
+        pytest.skip('NuiSI v2 is not in the user cache (./dev seeds it)')
+    out = tmp_path_factory.mktemp('nuisi')
+    return out, evaluate_nuisi(out, interactions_config(quick=True), versions=('v2',))['v2']
+
+
+def test_the_four_interactions_of_real_people_are_found_without_labels(nuisi_v2):
+    out, m = nuisi_v2
+    assert all(k in m for k in KEYS)
+    assert m['n_recordings'] == 44 and len(m['interactions']) == 4
+    # K inside each fold, from its 35 training recordings: 4 +- 1
+    assert sum(3 <= k <= 5 for k in m['n_components_selected']) >= 4
+    assert m['ari'] >= 0.75 and m['heldout_ari'] >= 0.6
+    assert m['recognition_accuracy_by_fraction']['1'] >= 0.75
+    assert m['supervised_accuracy_by_fraction']['0.5'] >= 0.9
+    assert_real_pngs(out, m['plots'])
