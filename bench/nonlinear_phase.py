@@ -20,7 +20,7 @@ import time
 import numpy as np
 from scipy import linalg, optimize
 
-from mixture_ip_ros.app.evaluation.baselines import majority_names
+from mixture_ip_ros.app.training import majority_names
 from mixture_ip_ros.app.evaluation.common import prefix_length
 from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.core.mixture import MixtureIProMP

@@ -153,16 +153,18 @@ def test_batched_final_rms_equals_controlled_rms(noise):
 
 
 def test_completion_and_heldout_loglik_on_ten_sampled_sets_of_three_patterns():
-    """Why training keeps the held-out log-likelihood for one agent: on ten sampled sets of
-    three well separated patterns it finds 3 every time, the completion criterion in 9 of 10
-    (seed 9: 2). bench/selection_curves.py has the same at wider within-pattern spreads."""
+    """Why the likelihood, not the completion, decides for one agent: on ten sampled sets of
+    three well separated patterns the held-out likelihood finds 3 every time, the completion
+    criterion in 8 or 9 of 10 (seed 9: 2; seed 8's K = 4 is better than K = 3 by 2.1 paired
+    standard errors, at the rule's edge, and which side it falls moves with the LAPACK build).
+    bench/selection_curves.py has the same at wider within-pattern spreads."""
     right = {'loglik': 0, 'completion': 0}
     for seed in range(10):
         demos = mixture_demos(seed=seed, n_obs=2, n_ctrl=0)[0]
         cal = calibrated_heldout_curves(demos, [1, 2, 3, 4, 5], n_basis=8)
         for name in right:
             right[name] += selection_curve(cal[name]['scores'], True, paired=True)['index'] == 2
-    assert right == {'loglik': 10, 'completion': 9}
+    assert right['loglik'] == 10 and right['completion'] in (8, 9)
 
 
 def test_completion_keeps_one_sampled_component():

@@ -202,18 +202,26 @@ def _offset_progress(progress, offset, total):
     return lambda done, n, K: progress(offset + done, n if total is None else total, K)
 
 
+def majority_names(assigned, labels, n_components) -> list:
+    """The majority label among the members of each of ``n_components`` clusters (``assigned``:
+    each item's cluster), None for a cluster with none. Ties go to the first label in
+    sorted order, so every run names the components alike."""
+    labels = np.asarray(labels, dtype=object)
+    assigned = np.asarray(assigned)
+    out = []
+    for k in range(n_components):
+        members = labels[assigned == k].tolist()
+        out.append(max(sorted(set(members), key=str), key=members.count) if members else None)
+    return out
+
+
 def component_labels(model, demos):
     """Majority training label of each component (for reports only; None if unlabeled)."""
     labels = [d.label for d in demos]
     if any(lbl is None for lbl in labels):
         return None
-    out = []
-    for k in range(model.n_components):
-        members = [lbl for lbl, r in zip(labels, model.resp_) if int(np.argmax(r)) == k]
-        # ties go to the first label in sorted order: the same names in every run
-        out.append(max(sorted(set(members), key=str), key=members.count) if members
-                   else f'component_{k}')
-    return out
+    names = majority_names(np.argmax(model.resp_, axis=1), labels, model.n_components)
+    return [name if name is not None else f'component_{k}' for k, name in enumerate(names)]
 
 
 def _model_params(kwargs) -> dict:

@@ -5,8 +5,8 @@ E step with latent weights for demonstrations with missing data (eqs. 21, 27-28)
 
 import numpy as np
 from scipy import linalg
-from scipy.special import logsumexp
 
+from .numerics import logsumexp_rows
 from .promp import LOG_2PI, _regularised_cov, weight_posterior
 
 
@@ -30,16 +30,10 @@ def _gmm_log_prob(W, weights, means, chols):
     return out, maha
 
 
-def _logsumexp_rows(lp):
-    """log sum_k exp(lp_ik) per row i, shifted by the row's maximum (finite rows)."""
-    top = lp.max(axis=1)
-    return top + np.log(np.exp(lp - top[:, None]).sum(axis=1))
-
-
 def gmm_responsibilities(W, weights, means, covs):
     """Eq. 7: r_ik = p(k | w_i); also returns the log-likelihood of eq. 6 summed over i."""
     lp = gmm_log_prob(W, weights, means, covs)
-    norm = logsumexp(lp, axis=1)
+    norm = logsumexp_rows(lp)
     return np.exp(lp - norm[:, None]), float(norm.sum())
 
 
@@ -115,5 +109,5 @@ def latent_e_step(stats, weights, means, covs, noise, lp_alpha, fixed_resp=None)
             lp[i, k] = np.log(weights[k]) + ll + lp_alpha[i, k]
     if fixed_resp is not None:
         return fixed_resp, float(np.sum(fixed_resp * lp)), post_means, post_covs
-    norm = logsumexp(lp, axis=1)
+    norm = logsumexp_rows(lp)
     return np.exp(lp - norm[:, None]), float(norm.sum()), post_means, post_covs

@@ -20,15 +20,16 @@ from scipy.special import logsumexp
 
 from .basis import GaussianBasis
 from .demonstration import Demonstration
-from .gmm import (_gmm_log_prob, _logsumexp_rows, covariance_penalty_of_m_step, gmm_log_prob,
+from .gmm import (_gmm_log_prob, covariance_penalty_of_m_step, gmm_log_prob,
                   gmm_maximization, gmm_responsibilities, latent_e_step, noise_m_step)
+from .numerics import logsumexp_rows
 from .noise import MAX_LAG_S, correlation_time, noise_factor, residual_autocovariance
 from .patterns import PatternMixture, PatternSpace
 from .interaction import condition_on_observed, trajectory_distribution
 from .phase import (alpha_log_density, alpha_m_step, alpha_penalty, alpha_prior_std,
                     timing_variance)
-from .promp import (ObservationStats, covariance_penalty,
-                    expected_sq_residual, log_evidence, observation_stats, stack_stats,
+from .promp import (ObservationStats, covariance_penalty, expected_sq_residual, log_evidence,
+                    observation_stats, ridge_weights_from_stats, stack_stats, start_ridge,
                     weight_posterior)
 
 
@@ -189,7 +190,8 @@ class MixtureIProMP:
                 if np.any(st.m < 1):
                     raise ValueError(f'demonstration {demo.name!r} has a DOF never observed; '
                                      "use method='em' for missing data")
-        W = np.array([self._ridge_weights(st) for st in stats])
+        ridge = start_ridge(self.ridge, self.method)
+        W = np.array([ridge_weights_from_stats(st, ridge) for st in stats])
         zero = np.zeros((W.shape[1], W.shape[1]))
         sq = np.array([expected_sq_residual(st, w, zero) for st, w in zip(stats, W)])  # (n, D)
         max_lag = int(np.ceil(MAX_LAG_S / np.median(periods)))
@@ -302,7 +304,7 @@ class MixtureIProMP:
             lp, maha = _gmm_log_prob(data.W, weights, means, chols)
             lp += lp_alpha                                                         # eq. 7
             if labels is None:
-                norm = _logsumexp_rows(lp)
+                norm = logsumexp_rows(lp)
                 new_resp, ll = np.exp(lp - norm[:, None]), float(norm.sum())
             else:
                 ll = float(np.sum(resp * lp))
@@ -349,13 +351,6 @@ class MixtureIProMP:
         if on.ndim > 1 or not np.all(np.isfinite(on) & (on >= 0)):
             raise ValueError('observation_noise must be a number or one number per observed DOF, '
                              f'each >= 0 (in the DOF\'s unit), got {self.observation_noise!r}')
-
-    def _ridge_weights(self, st):
-        """Eq. 14 per DOF (ridge); for EM only a starting point (more ridge where data is thin)."""
-        N = self.n_basis
-        ridge = self.ridge if self.method == 'regression' else max(self.ridge, 1e-2)
-        return np.concatenate([np.linalg.solve(st.G[j] + ridge * np.eye(N), st.b[j])
-                               for j in range(len(st.m))])
 
     # ------------------------------------------------------------------ inference
     @property
@@ -431,7 +426,7 @@ class MixtureIProMP:
                                                        self.alpha_std_ ** 2)
         for k in range(self.n_components):
             lp[:, k] += log_evidence(stats, self.means_[k], self.covariances_[k], noise[k])
-        return _logsumexp_rows(lp)
+        return logsumexp_rows(lp)
 
     # --------------------------------------------------------- weight vectors (eqs. 6-7)
     def demonstration_weights(self, demonstrations):
@@ -444,7 +439,7 @@ class MixtureIProMP:
                                    np.hstack([demo.observed, demo.controlled]))
             if np.any(st.m < 1):
                 raise ValueError(f'demonstration {demo.name!r} has a DOF never observed')
-            W.append(self._ridge_weights(st))
+            W.append(ridge_weights_from_stats(st, start_ridge(self.ridge, self.method)))
         return np.array(W)
 
     def score_samples(self, W):

@@ -29,6 +29,7 @@ from scipy import linalg
 
 from .basis import GaussianBasis
 from .kmeans import kmeans
+from .numerics import logsumexp_rows
 from .promp import LOG_2PI
 
 # Share of the spread between demonstrations the pattern space keeps.
@@ -110,11 +111,6 @@ def _log_densities(X, means, chols):
     return out
 
 
-def _logsumexp_rows(lp):
-    top = lp.max(axis=1)
-    return top + np.log(np.exp(lp - top[:, None]).sum(axis=1))
-
-
 class PatternMixture:
     """A Gaussian mixture in the pattern space, its covariances shrunk towards the covariance
     pooled within the components: Sigma_k = (S_k + s S_pooled) / (n_k + s) with S_k the
@@ -187,7 +183,7 @@ class PatternMixture:
             params = self._m_step(X, R)
             chols = [np.linalg.cholesky(c) for c in params[2]]
             lp = np.log(params[0]) + _log_densities(X, params[1], chols)
-            norm = _logsumexp_rows(lp)
+            norm = logsumexp_rows(lp)
             ll = float(norm.sum())
             if best is None or ll > best[0]:
                 best = (ll, params, R, it)
@@ -200,7 +196,7 @@ class PatternMixture:
     def score_samples(self, X) -> np.ndarray:
         """log p(x_i) under the mixture, (n,)."""
         X = np.asarray(X, dtype=float)
-        return _logsumexp_rows(np.log(self.weights_)
+        return logsumexp_rows(np.log(self.weights_)
                                + _log_densities(X, self.means_, self._chols))
 
     def predict(self, X) -> np.ndarray:

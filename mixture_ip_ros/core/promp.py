@@ -58,14 +58,32 @@ def observation_stats(basis: GaussianBasis, z, Y) -> ObservationStats:
                             observed.sum(axis=0).astype(float))
 
 
+# EM only starts from the regression weights, so it takes at least this ridge: a demonstration
+# with few samples of a DOF then starts near zero instead of at a wild least-squares fit.
+EM_START_RIDGE = 1e-2
+
+
+def start_ridge(ridge: float, method: str) -> float:
+    """The ridge of the per-demonstration weights a fit starts from (``method`` 'regression'
+    keeps them; 'em' only starts there)."""
+    return ridge if method == 'regression' else max(ridge, EM_START_RIDGE)
+
+
+def ridge_weights_from_stats(st: ObservationStats, ridge: float) -> np.ndarray:
+    """Eq. 14 per DOF from a demonstration's statistics, stacked (D N,):
+    w_j = (A_j^T A_j + ridge I)^-1 A_j^T y_j; a DOF with no observed sample gets 0 (the ridge's
+    answer)."""
+    N = st.G.shape[1]
+    eye = ridge * np.eye(N)
+    return np.concatenate([np.linalg.solve(st.G[j] + eye, st.b[j]) for j in range(len(st.m))])
+
+
 def ridge_weights(basis: GaussianBasis, z, Y, ridge: float = 1e-6) -> np.ndarray:
-    """Eq. 14 solved per DOF with a ridge: w_j = (A^T A + ridge I)^-1 A^T y_j, stacked."""
+    """Eq. 14 solved per DOF with a ridge for samples Y (T, D) at phases z (T,), stacked."""
     st = observation_stats(basis, z, Y)
     if np.any(st.m == 0):
         raise ValueError('ridge regression needs at least one observed sample of every DOF')
-    N = basis.n_basis
-    eye = ridge * np.eye(N)
-    return np.concatenate([np.linalg.solve(st.G[j] + eye, st.b[j]) for j in range(len(st.m))])
+    return ridge_weights_from_stats(st, ridge)
 
 
 def cho_inverse(cov_chol) -> np.ndarray:
@@ -229,7 +247,7 @@ class ProMP:
         self.basis_ = GaussianBasis(self.n_basis)
         self.n_dofs_ = trajectories[0][1].shape[1]
         stats = [observation_stats(self.basis_, z, Y) for z, Y in trajectories]
-        W = self._regression_init(trajectories)
+        W = self._regression_init(stats)
         d = W.shape[1]
         var = W.var(axis=0) if len(W) > 1 else np.ones(d)
         self.prior_cov_diag_ = self.prior_scale * np.maximum(var, 1e-12 * max(var.max(), 1e-12))
@@ -244,20 +262,18 @@ class ProMP:
             self._em(stats)
         return self
 
-    def _regression_init(self, trajectories):
+    def _regression_init(self, stats):
         """Per-trajectory eq. 14 weights; for EM only a starting point (a DOF never observed in a
         trajectory starts at the mean of the others)."""
         N = self.basis_.n_basis
-        ridge = self.ridge if self.method == 'regression' else max(self.ridge, 1e-2)
-        W = np.full((len(trajectories), self.n_dofs_ * N), np.nan)
-        for i, (z, Y) in enumerate(trajectories):
-            st = observation_stats(self.basis_, z, Y)
-            for j in range(self.n_dofs_):
-                if st.m[j] > 0:
-                    W[i, j * N:(j + 1) * N] = np.linalg.solve(st.G[j] + ridge * np.eye(N), st.b[j])
-                elif self.method == 'regression':
-                    raise ValueError("method='regression' needs every DOF observed in every "
-                                     "trajectory; use method='em' for missing data")
+        ridge = start_ridge(self.ridge, self.method)
+        W = np.empty((len(stats), self.n_dofs_ * N))
+        for i, st in enumerate(stats):
+            if self.method == 'regression' and np.any(st.m == 0):
+                raise ValueError("method='regression' needs every DOF observed in every "
+                                 "trajectory; use method='em' for missing data")
+            W[i] = ridge_weights_from_stats(st, ridge)
+            W[i].reshape(self.n_dofs_, N)[st.m == 0] = np.nan
         col_mean = np.nanmean(W, axis=0)
         if np.any(np.isnan(col_mean)):
             raise ValueError('some DOF is not observed in any trajectory')

@@ -21,7 +21,8 @@ from .basis import GaussianBasis
 from .demonstration import Demonstration
 from .interaction import trajectory_distribution
 from .mixture import (COMPLETION_FRACTIONS, PRIOR_SCALES, MixtureIProMP, Prepared,
-                      _logsumexp_rows, beginning_stats, checked_fractions)
+                      beginning_stats, checked_fractions)
+from .numerics import logsumexp_rows
 from .phase import alpha_log_density
 from .promp import ObservationStats, log_evidence, observation_stats, stack_stats
 
@@ -171,7 +172,7 @@ def completion_statistics(model, full: ObservationStats, beginnings, alphas):
                                                       model.alpha_std_ ** 2)
     whole = prior + np.column_stack([log_evidence(full, model.means_[k], model.covariances_[k],
                                                   noise[k]) for k in range(K)])
-    log_whole = _logsumexp_rows(whole)
+    log_whole = logsumexp_rows(whole)
     density = np.empty((n, len(beginnings)))
     rms = np.empty((n, len(beginnings)))
     for c, begin in enumerate(beginnings):
@@ -181,7 +182,7 @@ def completion_statistics(model, full: ObservationStats, beginnings, alphas):
             ll, post[k] = log_evidence(begin, model.means_[k], model.covariances_[k], noise[k],
                                        posterior_means=True)
             lp[:, k] += ll                                                  # eq. 11
-        density[:, c] = log_whole - _logsumexp_rows(lp)
+        density[:, c] = log_whole - logsumexp_rows(lp)
         w = post[np.argmax(lp, axis=1), np.arange(n)].reshape(n, D, N)     # eqs. 12-13
         # The rest's statistics are the whole's minus the beginning's (sums over samples).
         G, b = full.G - begin.G, full.b - begin.b

@@ -48,7 +48,8 @@ from mixture_ip_ros.nodes.cdr import (Float64MultiArrayEncoder, JointTrajectoryE
 from mixture_ip_ros.nodes.diagnostics import OK, WARN, PublishesDiagnostics, diagnostic_array
 from mixture_ip_ros.nodes.managed import ManagedNode, run_node
 from mixture_ip_ros.nodes.markers import prediction_markers
-from mixture_ip_ros.nodes.params import autostart_param, finite_list, param, positive
+from mixture_ip_ros.nodes.params import (autostart_param, event_topic_param, finite_list,
+                                         observation_topic_param, param, positive)
 from mixture_ip_ros.robot.description import (BASE_FRAME, DEFAULT_ROBOT, JOINT_NAMES,
                                               shipped_robots)
 from mixture_ip_ros.robot.kinematics import RobotKinematics
@@ -69,8 +70,8 @@ _DEFAULT_CATCH_UP = _catch_up_velocity(RobotKinematics(DEFAULT_ROBOT))
 class EstimatorParameters:
     autostart: bool = autostart_param()
     model_path: str = param('', 'trained model file (.npz from mixture-ip train); required')
-    observation_topic: str = param('/observer/wrist', 'geometry_msgs/PointStamped, reliable')
-    event_topic: str = param('/observer/event', 'std_msgs/Header, frame_id onset | end | gap')
+    observation_topic: str = observation_topic_param()
+    event_topic: str = event_topic_param()
     joint_state_topic: str = param('/joint_states', "the robot's joints, to time catching up "
                                                     'with a plan')
     trajectory_topic: str = param('joint_trajectory', 'trajectory_msgs/JointTrajectory to '

@@ -31,7 +31,8 @@ from mixture_ip_ros.estimation.pose_check import HumanLimits
 from mixture_ip_ros.nodes import qos
 from mixture_ip_ros.nodes.diagnostics import OK, WARN, PublishesDiagnostics, diagnostic_array
 from mixture_ip_ros.nodes.managed import ManagedNode, run_node
-from mixture_ip_ros.nodes.params import autostart_param, finite_list, param, positive
+from mixture_ip_ros.nodes.params import (autostart_param, event_topic_param, finite_list,
+                                         observation_topic_param, param, positive)
 from mixture_ip_ros.robot.description import (BASE_FRAME, DEFAULT_ROBOT, load_description,
                                               shipped_robots)
 
@@ -57,8 +58,8 @@ def _segmenter(name, description, **kw):
 class ObserverParameters:
     autostart: bool = autostart_param()
     wrist_topic: str = param('/mocap/wrist', 'geometry_msgs/PoseStamped, sensor-data QoS')
-    observation_topic: str = param('/observer/wrist', 'geometry_msgs/PointStamped, reliable')
-    event_topic: str = param('/observer/event', 'std_msgs/Header, frame_id onset | end | gap')
+    observation_topic: str = observation_topic_param()
+    event_topic: str = event_topic_param()
     expected_frame: str = param('world', "poses in another frame are dropped ('' = any)")
     robot: str = param(DEFAULT_ROBOT, 'the robot: a shipped name (' + ', '.join(shipped_robots())
                        + ') or a description file. Its base frame and the inverse of its '

@@ -44,6 +44,16 @@ def autostart_param():
                        'transitions (mixture-ip lifecycle NODE configure ...)')
 
 
+def observation_topic_param():
+    """The observer's cleaned wrist stream, which the estimator reads (one default for both)."""
+    return param('/observer/wrist', 'geometry_msgs/PointStamped, reliable')
+
+
+def event_topic_param():
+    """The observer's movement events, which the estimator reads (one default for both)."""
+    return param('/observer/event', 'std_msgs/Header, frame_id onset | end | gap')
+
+
 # -- rules a range cannot express ---------------------------------------------------------
 def positive(value) -> Optional[str]:
     return None if value > 0 else 'must be > 0'

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from mixture_ip_ros.app.evaluation.common import decimated_rows, prefix_length
+from mixture_ip_ros.app.training import majority_names
 from mixture_ip_ros.core.basis import GaussianBasis
 from mixture_ip_ros.core.selection import cv_folds
 from mixture_ip_ros.core.phase import log_evidence_batch
@@ -14,17 +15,6 @@ from mixture_ip_ros.core.promp import expected_sq_residual, observation_stats, r
 
 # Ridges tried on a class's weight covariance, as fractions of the mean weight variance.
 SHRINKAGES = (1e-4, 1e-3, 1e-2, 1e-1, 1.0)
-
-
-def majority_names(assigned, labels, n_components):
-    """The majority label of each cluster (ties to the first in sorted order, as
-    training.component_labels), None for an empty one."""
-    labels = np.asarray(labels)
-    out = []
-    for k in range(n_components):
-        members = labels[np.asarray(assigned) == k].tolist()
-        out.append(max(sorted(set(members), key=str), key=members.count) if members else None)
-    return out
 
 
 class PerClassProMP:
