@@ -19,7 +19,9 @@ KEYS = ('n_components_selected', 'ari', 'heldout_ari', 'recognition_accuracy_by_
         'partner_rms_cm_by_fraction', 'partner_final_cm_by_fraction', 'baseline_kmeans_ari',
         'baseline_gmm_pca_ari', 'baseline_nn_accuracy_by_fraction',
         'baseline_nn_partner_rms_cm_by_fraction', 'single_partner_rms_cm_by_fraction',
-        'supervised_partner_rms_cm_by_fraction', 'supervised_accuracy_by_fraction')
+        'supervised_partner_rms_cm_by_fraction', 'supervised_accuracy_by_fraction',
+        'true_k_accuracy_by_fraction', 'phase_known_accuracy_by_fraction',
+        'recognition_accuracy_by_interaction')
 
 
 def test_folds_hold_every_label_in_proportion():
@@ -104,4 +106,10 @@ def test_the_four_interactions_of_real_people_are_found_without_labels(nuisi_v2)
     assert m['ari'] >= 0.75 and m['heldout_ari'] >= 0.6
     assert m['recognition_accuracy_by_fraction']['1'] >= 0.75
     assert m['supervised_accuracy_by_fraction']['0.5'] >= 0.9
+    # the accuracy per interaction averages, weighted by their recordings, to the overall one
+    counts = {'handshake': 11, 'parachute_fistbump': 9, 'rocket_fistbump': 12, 'waving': 12}
+    by = m['recognition_accuracy_by_interaction']
+    assert set(by) == set(counts)
+    assert np.isclose(sum(counts[c] * by[c]['0.5'] for c in counts) / 44,
+                      m['recognition_accuracy_by_fraction']['0.5'])
     assert_real_pngs(out, m['plots'])

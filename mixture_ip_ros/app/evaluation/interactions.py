@@ -14,7 +14,13 @@ calibrated), labels only name its components afterwards (majority). Per fold:
   component's name), and the controlled agent predicted over the rest of the interaction under
   the MAP (component, phase speed) against the recorded one: RMS over the remaining samples and
   the error at the last one;
-- the same for the model with K = 1 and the supervised model (one component per interaction);
+- the same for the model with K = 1, the supervised model (one component per interaction)
+  and, to tell the choice of K from the rest, the unsupervised model with K the number of
+  interactions (``true_k_accuracy_by_fraction``); for the model with K chosen, the interaction
+  recognised with the phase known (eq. 11 with alpha = 1/T and p(alpha | k), on the samples the
+  estimator absorbs: ``phase_known_accuracy_by_fraction``), so that what the online estimator
+  loses to the unknown phase shows apart from what the clustering loses, and the online
+  accuracy per interaction (``recognition_accuracy_by_interaction``);
 - baselines on the same folds: k-means and a GaussianMixture on the resampled paths of both
   agents with the true number of interactions (ARI), and the nearest training recording by
   open-end DTW on the observed prefix (its interaction; its partner path, time-scaled).
@@ -30,7 +36,7 @@ import numpy as np
 
 from mixture_ip_ros.app.evaluation.baselines import NearestNeighbour, clustering_baselines
 from mixture_ip_ros.app.evaluation.common import (EvalConfig, feed_until, majority_labels,
-                                                  trained)
+                                                  phase_known_components, trained)
 from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.viz import plots
 
@@ -115,7 +121,7 @@ def evaluate_labelled(demos, out_dir: Path, config: EvalConfig = None, name: str
     fractions = tuple(float(f) for f in config.fractions)
     keys = [f'{f:g}' for f in fractions]
     fold = stratified_folds(labels, N_FOLDS, seed)
-    methods = ('mixture', 'single', 'supervised', 'nearest')
+    methods = ('mixture', 'single', 'supervised', 'true_k', 'nearest', 'phase_known')
     right = {m: np.zeros((len(demos), len(fractions)), dtype=bool) for m in methods}
     rms = {m: np.full((len(demos), len(fractions)), np.nan) for m in methods}
     final = {m: np.full((len(demos), len(fractions)), np.nan) for m in methods}
@@ -129,6 +135,7 @@ def evaluate_labelled(demos, out_dir: Path, config: EvalConfig = None, name: str
         model, info = trained(train, config, random_state=seed)
         single, _ = trained(train, config, n_components=1)
         supervised, _ = trained(train, config, labels=labels[train_i])
+        true_k, _ = trained(train, config, n_components=len(classes), random_state=seed)
         timings['training_s'] += time.perf_counter() - t0
         names = majority_labels(model, train)
         comp_train = np.argmax(model.resp_, axis=1)
@@ -137,7 +144,11 @@ def evaluate_labelled(demos, out_dir: Path, config: EvalConfig = None, name: str
             for i in test_i for ok in [~np.isnan(demos[i].observed).any(axis=1)]]
         t0 = time.perf_counter()
         namers = {'mixture': (model, names), 'single': (single, majority_labels(single, train)),
-                  'supervised': (supervised, list(supervised.classes_))}
+                  'supervised': (supervised, list(supervised.classes_)),
+                  'true_k': (true_k, majority_labels(true_k, train))}
+        for i in test_i:
+            right['phase_known'][i] = [names[k] == labels[i] for k in phase_known_components(
+                model, demos[i], fractions, config.min_interval)]
         for m, (mod, nm) in namers.items():
             online = _Online(mod, config)
             for i in test_i:
@@ -189,6 +200,11 @@ def evaluate_labelled(demos, out_dir: Path, config: EvalConfig = None, name: str
         'baseline_nn_accuracy_by_fraction': accuracy['nearest'],
         'single_accuracy_by_fraction': accuracy['single'],
         'supervised_accuracy_by_fraction': accuracy['supervised'],
+        'true_k_accuracy_by_fraction': accuracy['true_k'],
+        'phase_known_accuracy_by_fraction': accuracy['phase_known'],
+        'recognition_accuracy_by_interaction': {
+            c: {k: float(right['mixture'][labels == c, j].mean()) for j, k in enumerate(keys)}
+            for c in classes},
         'folds': per_fold,
     }
     err_unit = 'cm' if cm else 'unit'
