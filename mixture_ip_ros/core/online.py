@@ -4,7 +4,7 @@ alpha, updated recursively per observation, and the conditioned controlled-agent
 
 Each hypothesis (k, alpha_m) keeps the Gaussian over the observed agent's weights given D and
 its log evidence log p(D | k, alpha_m) (eqs. 17-18), updated in Kalman form in O(P d^2) per
-observation (core/_kalman: hypotheses in groups of SIMD lanes, covariances as packed lower
+observation (core._fast: hypotheses in groups of SIMD lanes, covariances as packed lower
 triangles). The basis rows psi(alpha_m t) are computed once per alpha and shared by every
 component. The controlled agent is recovered exactly only when asked for: since D depends
 on the observed weights alone, w_c | D follows from w_o | D through B_k = Sigma_co Sigma_oo^-1.
@@ -12,30 +12,12 @@ on the observed weights alone, w_c | D follows from w_o | D through B_k = Sigma_
 
 import numpy as np
 from scipy import linalg
-from scipy.special import logsumexp
 
-from ._kalman import (W, basis_rows, compact_lanes, from_lanes, kalman_update, mean_trajectory,
-                      to_lanes, tri_index)
+from ._fast import (W, basis_rows, compact_lanes, from_lanes, kalman_update, logsumexp,
+                    mean_trajectory, to_lanes, tri_index)
 from .interaction import trajectory_distribution
 from .phase import alpha_grid, alpha_log_prior
 from .promp import observation_stats, weight_posterior
-
-
-def _logsumexp(a: np.ndarray) -> float:
-    """scipy.special.logsumexp of a real 1-D array, with its operations in its order (the
-    largest terms apart: log1p of the others' sum scaled by their count, plus the log of that
-    count, plus the largest), so the same value bit for bit; without the array-API layers that
-    make scipy's take hundreds of microseconds per call on a few hundred numbers. Anything but
-    a finite maximum goes to scipy."""
-    a_max = a.max()
-    if not np.isfinite(a_max):
-        return float(logsumexp(a))
-    is_max = a == a_max
-    m = float(np.count_nonzero(is_max))
-    s = np.exp(np.where(is_max, -np.inf, a) - a_max).sum()
-    if s != 0:
-        s = s / m
-    return float(np.log1p(s) + np.log(m) + a_max)
 
 
 def spaced(t: float, t_last: float, min_interval: float) -> bool:
@@ -280,7 +262,7 @@ class OnlineEstimator:
         model as a whole explains the observations (core.novelty). Over the tracked hypotheses:
         with pruning it is low by at most the log of 1 - ``pruned_mass``."""
         n = self.n_tracked
-        return _logsumexp(self._prior[:n] + self._loglik[:n])
+        return logsumexp(self._prior[:n] + self._loglik[:n])
 
     def component_posterior(self):
         """p(k | D) (eq. 11 with the phase marginalised)."""
