@@ -72,7 +72,8 @@ class ComputedTorqueController:
         self.last_fault: str | None = None
         self._active_fault: str | None = None
         self._last_safe = np.zeros(n)
-        # Load the compiled kernels now (numba's disk cache), not in the first control step.
+        # Load robot._fast's compiled kernels now (from the disk cache), not in the first control
+        # step.
         acceleration_into(np.zeros((1, 3, n)), 0, self._zero, self._zero, self.kp, self.kd,
                           np.empty(n), np.empty((1, n)))
         clip_into(self._zero, self._neg_limit, self.effort_limit, np.empty(n))
