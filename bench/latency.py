@@ -67,7 +67,7 @@ from _common import (ESTIMATOR_PARAMS, ESTIMATOR_YAML, EVERY_POSE, GAP_S,  # noq
 from mixture_ip_ros.app.training import train_to_file  # noqa: E402
 from mixture_ip_ros.core.stamps import ns_to_parts, stamp_to_ns  # noqa: E402
 from mixture_ip_ros.nodes import qos  # noqa: E402
-from mixture_ip_ros.nodes.cdr import JointTrajectoryEncoder  # noqa: E402
+from mixture_ip_ros.io.cdr import JointTrajectoryEncoder  # noqa: E402
 from mixture_ip_ros.nodes.estimator_node import EstimatorNode  # noqa: E402
 from mixture_ip_ros.nodes.observer_node import ObserverNode  # noqa: E402
 from mixture_ip_ros.nodes.spinning import spin_in_thread, spin_until_shutdown  # noqa: E402

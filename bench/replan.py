@@ -21,7 +21,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint  # noqa: E
 
 from mixture_ip_ros.core.mixture import MixtureIProMP  # noqa: E402
 from mixture_ip_ros.core.online import OnlineEstimator  # noqa: E402
-from mixture_ip_ros.nodes.cdr import JointTrajectoryEncoder  # noqa: E402
+from mixture_ip_ros.io.cdr import JointTrajectoryEncoder  # noqa: E402
 from mixture_ip_ros.estimation.plans import build_plan  # noqa: E402
 from mixture_ip_ros.robot.description import JOINT_NAMES  # noqa: E402
 from mixture_ip_ros.scenarios.synthetic import mixture_demos  # noqa: E402
@@ -53,7 +53,7 @@ def reference(est, t_now):
 
 
 def current(est, t_now, encoder):
-    """What estimator_node does: planning.build_plan and nodes.cdr."""
+    """What estimator_node does: planning.build_plan and io.cdr."""
     plan = build_plan(est, t_now, n_points=N_POINTS, lookahead=LOOKAHEAD)
     return encoder.encode(ONSET_NS, np.round(plan.times * 1e9).astype(np.int64),
                           plan.positions, plan.velocities, plan.accelerations)

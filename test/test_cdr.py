@@ -1,5 +1,6 @@
-"""nodes.cdr: the bytes it builds are the messages rclpy builds (oracle: rclpy's deserializer
-and message equality), for every length and alignment the templates meet."""
+"""io.cdr: the bytes it builds are the messages rclpy builds (oracle: rclpy's deserializer
+and message equality), and the arrays it reads from messages rclpy serialized are their fields,
+for every length and alignment the layouts meet."""
 
 from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import PoseStamped
@@ -10,8 +11,9 @@ from rclpy.serialization import deserialize_message
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from mixture_ip_ros.nodes.cdr import (Float64MultiArrayEncoder, JointTrajectoryEncoder,
-                                      PathEncoder)
+from mixture_ip_ros.io.bags import typestore
+from mixture_ip_ros.io.cdr import (Float64MultiArrayEncoder, JointTrajectoryEncoder, PathEncoder,
+                                   joint_state_rows, pose_stamped_rows)
 
 NS = 1_000_000_000
 
@@ -119,3 +121,57 @@ def test_float64_multi_array_matches_rclpy(label, n):
         (-data).tolist()
     with pytest.raises(ValueError, match='one-dimensional'):
         enc.encode(data.reshape(1, -1))
+
+
+def _rosbags_cdr(msgtype, **fields):
+    """A message serialized by rosbags (the bags' serialiser: padding bytes are zero, where
+    rmw leaves whatever was in its buffer, so that only rosbags' messages of one layout are
+    byte for byte alike outside their values)."""
+    ts = typestore()
+    T = ts.types
+    stamp = fields.pop('stamp_ns')
+    header = T['std_msgs/msg/Header'](stamp=T['builtin_interfaces/msg/Time'](
+        sec=stamp // NS, nanosec=stamp % NS), frame_id=fields.pop('frame'))
+    return ts.serialize_cdr(T[msgtype](header=header, **fields), msgtype)
+
+
+@pytest.mark.parametrize('frame', ['', 'w', 'world', 'camera_link'])
+def test_pose_stamped_rows_are_the_messages_fields(frame):
+    ts = typestore().types
+    rng = np.random.default_rng(len(frame))
+    stamps = [0, 5, NS - 1, 1_700_000_000 * NS + 3]
+    values = rng.normal(size=(len(stamps), 7))
+    messages = [_rosbags_cdr('geometry_msgs/msg/PoseStamped', stamp_ns=ns, frame=frame,
+                             pose=ts['geometry_msgs/msg/Pose'](
+                                 position=ts['geometry_msgs/msg/Point'](*v[:3]),
+                                 orientation=ts['geometry_msgs/msg/Quaternion'](*v[3:])))
+                for ns, v in zip(stamps, values)]
+    ns, xyz, quat, got_frame = pose_stamped_rows(messages)
+    assert ns.tolist() == stamps and got_frame == frame
+    assert np.array_equal(xyz, values[:, :3]) and np.array_equal(quat, values[:, 3:])
+    other = bytes(messages[0][:12]) + b'\xff' + bytes(messages[0][13:])   # not one layout
+    assert pose_stamped_rows(messages + [other]) is None
+    assert pose_stamped_rows([messages[0][:-8]]) is None         # too short for its layout
+
+
+@pytest.mark.parametrize('names,frame', [(['a', 'bc', 'def', 'g'], ''),
+                                         ([f'iiwa_joint_{i}' for i in range(1, 8)], 'base')])
+@pytest.mark.parametrize('with_velocity', [True, False])
+def test_joint_state_rows_are_the_messages_fields(names, frame, with_velocity):
+    rng = np.random.default_rng(len(names))
+    stamps = [3, 2 * NS + 1, 0]
+    pos, vel = rng.normal(size=(2, len(stamps), len(names)))
+    messages = [_rosbags_cdr('sensor_msgs/msg/JointState', stamp_ns=ns, frame=frame, name=names,
+                             position=pos[i], velocity=vel[i] if with_velocity else np.zeros(0),
+                             effort=np.zeros(0))
+                for i, ns in enumerate(stamps)]
+    wanted = names[::-2]
+    ns, q, qd = joint_state_rows(messages, wanted)
+    index = [names.index(n) for n in wanted]
+    assert ns.tolist() == stamps and np.array_equal(q, pos[:, index])
+    assert np.array_equal(qd, vel[:, index]) if with_velocity else qd is None
+    assert joint_state_rows(messages, ['not_a_joint']) is None
+    renamed = _rosbags_cdr('sensor_msgs/msg/JointState', stamp_ns=0, frame=frame,
+                           name=[n.upper() for n in names], position=pos[0],
+                           velocity=vel[0] if with_velocity else np.zeros(0), effort=np.zeros(0))
+    assert joint_state_rows(messages + [renamed], wanted) is None

@@ -951,7 +951,7 @@ def test_poses_lost_before_the_observer_are_counted_from_the_stamps():
 
 
 def _check_plan_numpy(plan):
-    """check_plan as numpy statements (the oracle of its compiled form)."""
+    """check_plan as numpy statements (the oracle of its compiled form, _fast.plan_problem)."""
     for name in ('times', 'positions', 'velocities', 'accelerations'):
         if not np.isfinite(getattr(plan, name)).all():
             return f'non-finite {name}'
@@ -964,8 +964,8 @@ def _check_plan_numpy(plan):
 
 
 def _limit_numbers_numpy(plan, limits):
-    """within_limits' numbers as numpy statements: (first joint beyond its positions, its worst
-    position) or the time scale."""
+    """within_limits' numbers as numpy statements (the oracle of _fast.limit_ratios): (first
+    joint beyond its positions, its worst position) or the time scale."""
     low, high = plan.positions < limits.lower, plan.positions > limits.upper
     if low.any() or high.any():
         j = int(np.flatnonzero((low | high).any(axis=0))[0])
@@ -1022,10 +1022,10 @@ def test_plan_checks_equal_their_numpy_statements():
 
 
 def test_plan_phases_are_numpys_linspace():
-    from mixture_ip_ros.estimation.plans import _linspace
+    from mixture_ip_ros.estimation._fast import linspace
     rng = np.random.default_rng(8)
     for _ in range(2000):
         start = rng.choice([rng.uniform(-2, 1), 0.0, 1.0 - 1e-17, 5e-324])
         stop = rng.choice([1.0, start, rng.uniform(-3, 3)])
         num = int(rng.integers(2, 60))
-        assert np.array_equal(_linspace(start, stop, num), np.linspace(start, stop, num))
+        assert np.array_equal(linspace(start, stop, num), np.linspace(start, stop, num))

@@ -5,6 +5,7 @@ import mujoco
 import numpy as np
 import pytest
 
+from mixture_ip_ros.robot._fast import acceleration_into, clip_into
 from mixture_ip_ros.robot.controller import ComputedTorqueController, default_gains
 from mixture_ip_ros.robot.description import DEFAULT, JOINT_NAMES, shipped_robots
 from mixture_ip_ros.robot.kinematics import RobotKinematics
@@ -284,3 +285,28 @@ def test_follow_holds_through_a_non_finite_reference_as_compute_does():
     assert logs[0] == logs[1] and 'non-finite' in logs[0][0]
     assert ctrls[0].holding == ctrls[1].holding is False
     assert np.array_equal(ctrls[0]._last_safe, ctrls[1]._last_safe)
+
+
+def test_compiled_steps_equal_their_numpy_bit_for_bit():
+    """robot._fast against the numpy of ComputedTorqueController._fast on random inputs: the
+    acceleration and error of the control law, and the finiteness check and the clip."""
+    rng = np.random.default_rng(4)
+    for trial in range(300):
+        n = int(rng.integers(1, 10))
+        refs = rng.normal(0, 10.0 ** rng.integers(-3, 4), (4, 3, n))
+        q, qd = rng.normal(0, 2, (2, n))
+        kp, kd = rng.uniform(0, 500, (2, n))
+        k = int(rng.integers(4))
+        a, errors = np.empty(n), np.zeros((4, n))
+        acceleration_into(refs, k, q, qd, kp, kd, a, errors)
+        q_ref, qd_ref, qdd_ref = refs[k]
+        assert np.array_equal(a, qdd_ref + kp * (q_ref - q) + kd * (qd_ref - qd))
+        assert np.array_equal(errors[k], q_ref - q)
+        tau = rng.normal(0, 10.0 ** rng.integers(-2, 5), n)
+        if trial % 5 == 0:
+            tau[rng.integers(n)] = rng.choice([np.nan, np.inf, -np.inf])
+        high = rng.uniform(1, 300, n)
+        out = np.full(n, 7.0)
+        ok = clip_into(tau, -high, high, out)
+        assert ok == np.isfinite(tau.dot(tau))
+        assert np.array_equal(out, tau.clip(-high, high) if ok else np.full(n, 7.0))

@@ -4,7 +4,7 @@ alpha, updated recursively per observation, and the conditioned controlled-agent
 
 Each hypothesis (k, alpha_m) keeps the Gaussian over the observed agent's weights given D and
 its log evidence log p(D | k, alpha_m) (eqs. 17-18), updated in Kalman form in O(P d^2) per
-observation (core/_kalman: hypotheses in groups of SIMD lanes, covariances as packed lower
+observation (core._fast: hypotheses in groups of SIMD lanes, covariances as packed lower
 triangles). The basis rows psi(alpha_m t) are computed once per alpha and shared by every
 component. The controlled agent is recovered exactly only when asked for: since D depends
 on the observed weights alone, w_c | D follows from w_o | D through B_k = Sigma_co Sigma_oo^-1.
@@ -13,8 +13,8 @@ on the observed weights alone, w_c | D follows from w_o | D through B_k = Sigma_
 import numpy as np
 from scipy import linalg
 
-from ._kalman import (W, basis_rows, compact_lanes, from_lanes, kalman_update, mean_trajectory,
-                      to_lanes, tri_index)
+from ._fast import (W, basis_rows, compact_lanes, from_lanes, kalman_update, logsumexp,
+                    mean_trajectory, to_lanes, tri_index)
 from .interaction import trajectory_distribution
 from .numerics import logsumexp
 from .phase import alpha_grid, alpha_log_prior

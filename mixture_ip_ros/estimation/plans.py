@@ -12,14 +12,18 @@ joint_trajectory_controller rejects a trajectory ending in motion). When ``z_sta
 human is at rest) the plan is a single point: the predicted final posture, reached
 ``max(lookahead, settle_time)`` after ``t_now``; later final plans of the same interaction keep
 that time (while it is still ahead) so that the arrival does not recede with every replan.
+
+The phases (np.linspace) and the checks of a plan run as compiled kernels (estimation._fast),
+one call each with the values of the numpy statements they stand for.
 """
 
 from dataclasses import dataclass, replace
 import math
 from typing import Optional, Tuple
 
-import numba
 import numpy as np
+
+from mixture_ip_ros.estimation._fast import PLAN_PROBLEMS, limit_ratios, linspace, plan_problem
 
 PHASE_EPS = 1e-6
 # A plan would have to be slowed down more than this to respect the joint speed limits: it is
@@ -28,26 +32,6 @@ MAX_TIME_SCALE = 4.0
 # A plan slowed down to its limits is slowed this much more (relative): times sent as whole
 # nanoseconds and rounded divisions would put one exactly at a limit just beyond it.
 SLOWDOWN_MARGIN = 1e-6
-
-
-# The node plans in callbacks that follow a wait, where each distinct numpy call costs tens of
-# microseconds (bench/replan.py, 'after_sleep'): the phases and the checks of every plan are
-# compiled, one call each, with the values of the numpy statements they replace (tests).
-_F1, _F2 = numba.float64[:], numba.float64[:, :]
-
-
-@numba.njit(_F1(numba.float64, numba.float64, numba.int64), cache=True)
-def _linspace(start, stop, num):
-    """np.linspace(start, stop, num) for num >= 2, its operations elementwise (i step + start,
-    or (i / (num - 1)) delta + start when the step underflows to zero; the last one is stop)."""
-    div = num - 1
-    delta = stop - start
-    step = delta / div
-    y = np.empty(num)
-    for i in range(num):
-        y[i] = (i / div * delta if step == 0 else i * step) + start
-    y[num - 1] = stop
-    return y
 
 
 @dataclass(frozen=True)
@@ -145,7 +129,7 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
             final_time = t_now + max(lookahead, settle_time)
         times = np.array([float(final_time)])
     else:
-        phases = _linspace(z_start, 1.0, n_points)
+        phases = linspace(z_start, 1.0, n_points)
         times = phases / a
     # a: the grid value actually used (identical when it came from the grid)
     k, a, (pos, vel, acc), _ = estimator.mean_trajectories(phases, component=component, alpha=a)
@@ -169,7 +153,7 @@ def predicted_paths(estimator, n_points: int, components=None):
     """The whole predicted human movement (phases evenly spaced over 0..1) of each component
     under its MAP alpha: a list of (component, alpha, times (s since onset), positions
     (n_points, P)) for ``components`` (default: all)."""
-    phases = _linspace(0.0, 1.0, n_points)
+    phases = linspace(0.0, 1.0, n_points)
     out = []
     joint = estimator.joint_posterior()
     for k in (range(estimator.n_components) if components is None else components):
@@ -182,77 +166,17 @@ def predicted_paths(estimator, n_points: int, components=None):
 def predicted_wrist(estimator, plan: Plan, n_points: int):
     """The whole predicted human movement under the plan's hypothesis: times (s since onset)
     and positions (n_points, P) at phases evenly spaced over 0..1."""
-    phases = _linspace(0.0, 1.0, n_points)
+    phases = linspace(0.0, 1.0, n_points)
     _, a, _, positions = estimator.mean_trajectories((), phases, component=plan.component,
                                                      alpha=plan.alpha)
     return phases / a, positions
 
 
-_PLAN_PROBLEMS = (None, 'non-finite times', 'non-finite positions', 'non-finite velocities',
-                  'non-finite accelerations', 'times not strictly increasing (or negative)',
-                  'last point not at rest')
-
-
-@numba.njit(numba.int64(_F1, _F2, _F2, _F2), cache=True)
-def _plan_problem(times, positions, velocities, accelerations):
-    """Index into _PLAN_PROBLEMS of the first problem, in check_plan's order (0: none)."""
-    for x in times:
-        if not np.isfinite(x):
-            return 1
-    for code, a in ((2, positions), (3, velocities), (4, accelerations)):
-        for x in a.ravel():
-            if not np.isfinite(x):
-                return code
-    previous = 0.0
-    for i in range(times.shape[0]):
-        ns = np.rint(times[i] * 1e9)          # np.round: half to even
-        if (i == 0 and ns < 0) or (i > 0 and ns <= previous):
-            return 5
-        previous = ns
-    last = times.shape[0] - 1
-    for j in range(velocities.shape[1]):
-        if velocities[last, j] != 0 or accelerations[last, j] != 0:
-            return 6
-    return 0
-
-
-@numba.njit(numba.types.Tuple((numba.int64, numba.float64, numba.float64, numba.float64))(
-    _F1, _F2, _F2, _F2, _F1, _F1, _F1, _F1), cache=True)
-def _limit_ratios(times, positions, velocities, accelerations, lower, upper, velocity,
-                  acceleration):
-    """(the first joint with a position beyond its limits, or -1; its lowest position if one is
-    below the lower limit, else its highest; the largest speed over its limit, of a point's
-    velocity or the mean between two points, |v| / v_limit; max |a| / a_limit), each ratio a
-    division then a maximum, as numpy's."""
-    n, q = positions.shape
-    for j in range(q):
-        low = high = False
-        lowest, highest = np.inf, -np.inf
-        for i in range(n):
-            p = positions[i, j]
-            low |= p < lower[j]
-            high |= p > upper[j]
-            lowest = min(lowest, p)
-            highest = max(highest, p)
-        if low or high:
-            return j, lowest if low else highest, 0.0, 0.0
-    v = a = -np.inf
-    for i in range(n):
-        for j in range(q):
-            v = max(v, abs(velocities[i, j]) / velocity[j])
-            a = max(a, abs(accelerations[i, j]) / acceleration[j])
-    for i in range(n - 1):
-        for j in range(q):
-            v = max(v, abs(positions[i + 1, j] - positions[i, j]) / (times[i + 1] - times[i])
-                    / velocity[j])
-    return -1, 0.0, v, a
-
-
 def check_plan(plan: Plan) -> Optional[str]:
     """Why the plan must not be published (None if it may): non-finite values, times not
     strictly increasing at nanosecond resolution, motion at the last point."""
-    return _PLAN_PROBLEMS[_plan_problem(plan.times, plan.positions, plan.velocities,
-                                        plan.accelerations)]
+    return PLAN_PROBLEMS[plan_problem(plan.times, plan.positions, plan.velocities,
+                                      plan.accelerations)]
 
 
 @dataclass(frozen=True)
@@ -292,9 +216,9 @@ def within_limits(plan: Plan, limits: JointLimits, t_plan: float) -> Tuple[Optio
     if plan.positions.shape[1] != limits.lower.shape[0]:
         raise ValueError(f'{plan.positions.shape[1]} joints in the plan, '
                          f'{limits.lower.shape[0]} in the limits')
-    j, worst, v, a = _limit_ratios(plan.times, plan.positions, plan.velocities,
-                                   plan.accelerations, limits.lower, limits.upper,
-                                   limits.velocity, limits.acceleration)
+    j, worst, v, a = limit_ratios(plan.times, plan.positions, plan.velocities,
+                                  plan.accelerations, limits.lower, limits.upper,
+                                  limits.velocity, limits.acceleration)
     if j >= 0:
         return None, (f'joint {j + 1} at {worst:.3f} rad, beyond its limits '
                       f'[{limits.lower[j]:.3f}, {limits.upper[j]:.3f}]'), 1.0

@@ -30,6 +30,7 @@ import numpy as np
 import yaml
 
 from mixture_ip_ros.core.stamps import ns_to_parts, stamp_to_ns
+from mixture_ip_ros.io import cdr
 from mixture_ip_ros.robot.description import JOINT_NAMES
 
 WRIST_TOPIC = '/mocap/wrist'
@@ -338,6 +339,12 @@ def _stamp_or_log(stamp, log_ns: int) -> int:
     return ns if ns > 0 else log_ns
 
 
+def _stamps_or_log(ns: np.ndarray, msgs) -> np.ndarray:
+    """:func:`_stamp_or_log` of every message: header stamps ``ns`` (n,), the log time of the
+    message (conn, log_ns, data) where a stamp is 0."""
+    return np.where(ns > 0, ns, np.asarray([log_ns for _, log_ns, _ in msgs], dtype=np.int64))
+
+
 def read_bag(path, *, wrist_topic: str = WRIST_TOPIC, joint_topic: str = JOINT_TOPIC,
              joint_names: Sequence[str] = JOINT_NAMES) -> RawRecording:
     """Read one demonstration bag (directory, or a bare .mcap/.db3 file) into a :class:`RawRecording`.
@@ -363,11 +370,18 @@ def read_bag(path, *, wrist_topic: str = WRIST_TOPIC, joint_topic: str = JOINT_T
     # A recorder writes one topic's messages with one layout (the same frame id and joint
     # names): then every field is at the same offset of every message and the whole stream is
     # read as one array; any other stream is decoded message by message.
-    wrist = _poses_at_fixed_offsets(wrist_msgs) or _decode_poses(path, wrist_msgs)
-    joints = (_joint_states_at_fixed_offsets(joint_msgs, joint_names)
-              or _decode_joint_states(path, joint_msgs, joint_names, joint_topic))
-    w_ns, w_xyz, w_quat, frames = wrist
-    j_ns, j_q, qd = joints
+    wrist = cdr.pose_stamped_rows([data for _, _, data in wrist_msgs])
+    if wrist is None:
+        w_ns, w_xyz, w_quat, frames = _decode_poses(path, wrist_msgs)
+    else:
+        w_ns, w_xyz, w_quat, frame = wrist
+        w_ns, frames = _stamps_or_log(w_ns, wrist_msgs), {frame}
+    joints = cdr.joint_state_rows([data for _, _, data in joint_msgs], joint_names)
+    if joints is None:
+        j_ns, j_q, qd = _decode_joint_states(path, joint_msgs, joint_names, joint_topic)
+    else:
+        j_ns, j_q, qd = joints
+        j_ns = _stamps_or_log(j_ns, joint_msgs)
     if len(frames) > 1:
         raise BagError(path, f'wrist messages on {wrist_topic!r} use several frames {sorted(frames)}')
     if not np.all(np.isfinite(j_q)):
@@ -434,102 +448,6 @@ def _decode_joint_states(path, msgs, joint_names, joint_topic):
         qds.append(vel[index] if vel.size == len(names) else None)
     qd = np.asarray(qds, dtype=float) if all(v is not None for v in qds) else None
     return np.asarray(ns, dtype=np.int64), np.asarray(qs, dtype=float), qd
-
-
-# CDR as rosbag2 stores it from rmw: a 4-byte encapsulation header (00 01 00 00: little endian),
-# then the fields, each aligned to its size from the end of that header; strings are a uint32
-# length (with the terminating NUL) and the bytes, sequences a uint32 count and the elements.
-_CDR_LE = b'\x00\x01\x00\x00'
-
-
-def _same_size_rows(msgs):
-    """The messages' bytes as one (n, size) uint8 array, or None unless they are all the same
-    little-endian CDR size."""
-    size = len(msgs[0][2])
-    if any(len(data) != size for _, _, data in msgs) or bytes(msgs[0][2][:4]) != _CDR_LE:
-        return None
-    return np.frombuffer(b''.join(bytes(data) for _, _, data in msgs),
-                         dtype=np.uint8).reshape(len(msgs), size)
-
-
-def _aligned(offset: int, size: int) -> int:
-    """``offset`` (from the start of the message) moved to the next multiple of ``size`` past
-    the encapsulation header."""
-    return 4 + -(-(offset - 4) // size) * size
-
-
-def _field(rows, offset: int, dtype: str, count: int = 1):
-    """``count`` values of ``dtype`` at ``offset`` of every row: (n, count)."""
-    width = np.dtype(dtype).itemsize * count
-    return np.ascontiguousarray(rows[:, offset:offset + width]).view(dtype)
-
-
-def _stamps(rows, log_ns):
-    """header.stamp of every row in ns (fields at bytes 4 and 8); the log time where it is 0."""
-    ns = (_field(rows, 4, '<i4')[:, 0].astype(np.int64) * 1_000_000_000
-          + _field(rows, 8, '<u4')[:, 0].astype(np.int64))
-    return np.where(ns > 0, ns, np.asarray(log_ns, dtype=np.int64))
-
-
-def _constant(rows, lo: int, hi: int) -> bool:
-    return bool((rows[:, lo:hi] == rows[0, lo:hi]).all())
-
-
-def _poses_at_fixed_offsets(msgs):
-    """:func:`_decode_poses` for messages that share one layout (the same size and frame id),
-    or None. PoseStamped: stamp (int32 sec, uint32 nanosec), frame_id, then 7 float64."""
-    rows = _same_size_rows(msgs)
-    if rows is None or rows.shape[1] < 16:
-        return None
-    length = int(_field(rows[:1], 12, '<u4')[0, 0])
-    pose = _aligned(16 + length, 8)
-    if pose + 56 != rows.shape[1] or not _constant(rows, 12, 16 + length):
-        return None
-    values = _field(rows, pose, '<f8', 7)
-    frame = bytes(rows[0, 16:16 + length]).rstrip(b'\x00').decode()
-    return (_stamps(rows, [m[1] for m in msgs]), values[:, :3].copy(), values[:, 3:].copy(),
-            {frame})
-
-
-def _joint_states_at_fixed_offsets(msgs, joint_names):
-    """:func:`_decode_joint_states` for messages that share one layout (the same size, frame
-    id and names, and as many positions as names), or None. JointState: stamp, frame_id,
-    string[] name, float64[] position, velocity, effort."""
-    rows = _same_size_rows(msgs)
-    if rows is None:
-        return None
-    first = bytes(rows[0])
-    try:
-        o = 16 + int.from_bytes(first[12:16], 'little')                      # past frame_id
-        o = _aligned(o, 4)
-        count = int.from_bytes(first[o:o + 4], 'little')
-        o += 4
-        names = []
-        if 4 * count > len(first) - o:                  # not this layout (or a broken message)
-            return None
-        for _ in range(count):
-            o = _aligned(o, 4)
-            length = int.from_bytes(first[o:o + 4], 'little')
-            names.append(first[o + 4:o + 4 + length].rstrip(b'\x00').decode())
-            o += 4 + length
-        arrays = []
-        for _ in range(3):                                     # position, velocity, effort
-            o = _aligned(o, 4)
-            n = int.from_bytes(first[o:o + 4], 'little')
-            start = _aligned(o + 4, 8) if n else o + 4
-            arrays.append((o, start, n))
-            o = start + 8 * n
-    except UnicodeDecodeError:
-        return None
-    (p_count, p_start, n_pos), (v_count, v_start, n_vel), (e_count, _, _) = arrays
-    if (o != rows.shape[1] or n_pos != len(names) or not set(joint_names) <= set(names)
-            or not _constant(rows, 12, p_start) or not _constant(rows, v_count, v_count + 4)
-            or not _constant(rows, e_count, e_count + 4)):
-        return None
-    index = [names.index(n) for n in joint_names]
-    q = _field(rows, p_start, '<f8', n_pos)[:, index]
-    qd = _field(rows, v_start, '<f8', n_vel)[:, index] if n_vel == len(names) else None
-    return _stamps(rows, [m[1] for m in msgs]), q, qd
 
 
 def _unique_sorted(ns: np.ndarray) -> np.ndarray:

@@ -41,10 +41,9 @@ from mixture_ip_ros.estimation.planner import OnlinePlanner, PlannerSettings
 from mixture_ip_ros.estimation.plans import (JointLimits, PosteriorSummary, predicted_paths,
                                              predicted_wrist)
 from mixture_ip_ros.estimation.records import LatencyStats
+from mixture_ip_ros.io.cdr import Float64MultiArrayEncoder, JointTrajectoryEncoder, PathEncoder
 from mixture_ip_ros.io.model_file import load_model
 from mixture_ip_ros.nodes import qos
-from mixture_ip_ros.nodes.cdr import (Float64MultiArrayEncoder, JointTrajectoryEncoder,
-                                      PathEncoder)
 from mixture_ip_ros.nodes.diagnostics import OK, WARN, PublishesDiagnostics, diagnostic_array
 from mixture_ip_ros.nodes.managed import ManagedNode, run_node
 from mixture_ip_ros.nodes.markers import prediction_markers
@@ -294,7 +293,7 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
         return values if partial else PlannerSettings(**values)
 
     def _warm_up(self):
-        # The first update compiles the numba kernels (cached on disk): now, not mid-reach.
+        # The first update compiles core._fast's kernels (cached on disk): now, not mid-reach.
         self.estimator.update(0.0, np.zeros(self.estimator.n_observed))
         self.estimator.predict(np.linspace(0.0, 1.0, 3))
         self.estimator.mean_trajectories([0.5], [0.5])

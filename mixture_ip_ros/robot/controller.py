@@ -5,37 +5,11 @@ from __future__ import annotations
 import logging
 import math
 
-import numba
 import numpy as np
 import pinocchio as pin
 
+from mixture_ip_ros.robot._fast import acceleration_into, clip_into
 from mixture_ip_ros.robot.kinematics import RobotKinematics
-
-
-@numba.njit(cache=True)
-def _acceleration(refs, k, q, qd, kp, kd, a, errors):
-    """The control law's acceleration for the reference refs[k] = (q_ref, qd_ref, qdd_ref):
-    a = qdd_ref + Kp (q_ref - q) + Kd (qd_ref - qd), and errors[k] = q_ref - q. The operations
-    of the numpy expression in compute, in its order (no fused multiply-add): the same values
-    bit for bit, in one call instead of six."""
-    for j in range(a.shape[0]):
-        e = refs[k, 0, j] - q[j]
-        errors[k, j] = e
-        a[j] = refs[k, 2, j] + kp[j] * e + kd[j] * (refs[k, 1, j] - qd[j])
-
-
-@numba.njit(cache=True)
-def _clip_into(tau, low, high, out):
-    """out = tau clipped to [low, high] and True; False (out untouched) when tau's sum of
-    squares is not finite (the check of compute's fast path)."""
-    ss = 0.0
-    for j in range(tau.shape[0]):
-        ss += tau[j] * tau[j]
-    if not np.isfinite(ss):
-        return False
-    for j in range(tau.shape[0]):
-        out[j] = min(max(tau[j], low[j]), high[j])
-    return True
 
 
 def default_gains(natural_frequency, damping_ratio, dof: int):
@@ -98,10 +72,11 @@ class ComputedTorqueController:
         self.last_fault: str | None = None
         self._active_fault: str | None = None
         self._last_safe = np.zeros(n)
-        # Load the compiled kernels now (numba's disk cache), not in the first control step.
-        _acceleration(np.zeros((1, 3, n)), 0, self._zero, self._zero, self.kp, self.kd,
-                      np.empty(n), np.empty((1, n)))
-        _clip_into(self._zero, self._neg_limit, self.effort_limit, np.empty(n))
+        # Load robot._fast's compiled kernels now (from the disk cache), not in the first control
+        # step.
+        acceleration_into(np.zeros((1, 3, n)), 0, self._zero, self._zero, self.kp, self.kd,
+                          np.empty(n), np.empty((1, n)))
+        clip_into(self._zero, self._neg_limit, self.effort_limit, np.empty(n))
 
     def _gain(self, value, name):
         try:
@@ -170,12 +145,13 @@ class ComputedTorqueController:
 
     def _steps(self, q, qd, refs, n, holding, ctrl, advance, errors):
         # At 1 kHz the cost is numpy's and Python's call overhead, not the arithmetic: four calls
-        # per step (two compiled, Pinocchio's RNEA, the plant's step), everything in locals.
+        # per step (two compiled ones from robot._fast, Pinocchio's RNEA, the plant's step),
+        # everything in locals.
         # compute's fast path in those calls; a torque that is not finite goes through compute
         # itself (the careful path finds the culprit, holds and logs).
         model, data = self._model, self._data
         kp, kd, low, high = self.kp, self.kd, self._neg_limit, self.effort_limit
-        rnea, accelerate, clip_into = pin.rnea, _acceleration, _clip_into
+        rnea, accelerate, clip = pin.rnea, acceleration_into, clip_into
         a = np.empty(self.dof)
         fast = None     # the last unclipped torque of the fast path, its state not yet recorded
         for i in range(n):
@@ -183,7 +159,7 @@ class ComputedTorqueController:
             accelerate(refs, k, q, qd, kp, kd, a, errors)
             try:
                 tau = rnea(model, data, q, qd, a)
-                ok = clip_into(tau, low, high, ctrl)
+                ok = clip(tau, low, high, ctrl)
             except (TypeError, ValueError, RuntimeError):
                 ok = False
             if ok:

@@ -1,10 +1,18 @@
-"""Compiled inner loops of the online estimator: one observation, every hypothesis
-(kalman_update), and the mean trajectory that a robot command needs (mean_trajectory).
+"""The core layer's fast paths: compiled (numba) and numpy code that replaces a plain
+computation of the layer where the online estimator spends its time. Each says which plain
+function it must equal, and the tests compare them (test_core_fast, test_core_online):
 
-Per hypothesis h the observed-agent weights have N(mu_h, Sigma_h); the observation
-y = (I_P kron psi_h^T) w + e, e ~ N(0, diag(noise)). The update factors S = L L^T (P x P) and
-applies G = L^-1 H Sigma, Sigma -= G^T G, which keeps Sigma positive definite over thousands
-of updates (the textbook K H Sigma form drifts). Cost O(P d^2) per hypothesis.
+- kalman_update: one observation, every hypothesis; the recursive form of
+  promp.weight_posterior (the batch conditioning, eqs. 3-5 and 17-18), equal to rounding;
+- basis_rows: GaussianBasis.__call__ (psi clamped to [0, 1]), equal to rounding;
+- mean_trajectory: the means of interaction.trajectory_distribution, equal to rounding;
+- logsumexp: scipy.special.logsumexp of a 1-D array, bit for bit.
+
+Kalman update. Per hypothesis h the observed-agent weights have N(mu_h, Sigma_h); the
+observation y = (I_P kron psi_h^T) w + e, e ~ N(0, diag(noise)). The update factors
+S = L L^T (P x P) and applies G = L^-1 H Sigma, Sigma -= G^T G, which keeps Sigma positive
+definite over thousands of updates (the textbook K H Sigma form drifts). Cost O(P d^2) per
+hypothesis.
 
 Layout: hypotheses (columns) in groups of W = 8 lanes, each group contiguous, so one SIMD
 register holds one entry of eight hypotheses and a group's state (d (d + 1) / 2 W doubles)
@@ -13,6 +21,10 @@ construction, half the update): entry (i, j), j <= i, of column c = g W + l is
 cov[g, (i (i + 1) / 2 + j) W + l]; mu[g, i W + l] is entry i of its mean. The columns of the
 groups past the tracked ones, and the lanes past them in the last group, hold valid states
 that are updated with the others and never read (see OnlineEstimator's pruning).
+
+Every kernel of the layer is in this one file: numba's cache of a kernel is invalidated by
+edits to the kernel's own file only, so kernels that call one another (and the lane type
+they share) must change together.
 """
 
 import operator
@@ -22,6 +34,7 @@ import numpy as np
 from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic, models, overload, register_model
+from scipy import special
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
 
@@ -36,8 +49,7 @@ _LOG_2PI = float(np.log(2.0 * np.pi))
 # vload(a, i) / vstore(a, i, v) read / write a[i:i + W] of a 1-D C-contiguous float64 array
 # without bounds checks (the caller keeps i + W <= len(a)); vsplat(x) has x in every lane;
 # +, -, *, / are lane-wise and may fuse a multiply-add (as fastmath={'contract'}); vsqrt is the
-# lane-wise square root. (Here rather than in a module of its own: numba's cache of a kernel
-# is invalidated by edits to the kernel's file only.)
+# lane-wise square root.
 
 W = 8
 _LANES = ir.VectorType(ir.DoubleType(), W)
@@ -394,3 +406,20 @@ def mean_trajectory(weights, z, centers, width, alpha):
                     vel[t, j] += alpha * dpsi * weights[j, i]
                     acc[t, j] += alpha * alpha * ddpsi * weights[j, i]
     return pos, vel, acc
+
+
+def logsumexp(a: np.ndarray) -> float:
+    """scipy.special.logsumexp of a real 1-D array, with its operations in its order (the
+    largest terms apart: log1p of the others' sum scaled by their count, plus the log of that
+    count, plus the largest), so the same value bit for bit; without the array-API layers that
+    make scipy's take hundreds of microseconds per call on a few hundred numbers. Anything but
+    a finite maximum goes to scipy."""
+    a_max = a.max()
+    if not np.isfinite(a_max):
+        return float(special.logsumexp(a))
+    is_max = a == a_max
+    m = float(np.count_nonzero(is_max))
+    s = np.exp(np.where(is_max, -np.inf, a) - a_max).sum()
+    if s != 0:
+        s = s / m
+    return float(np.log1p(s) + np.log(m) + a_max)

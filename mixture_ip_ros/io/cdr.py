@@ -1,29 +1,39 @@
-"""Serialized JointTrajectory and Path messages, filled from numpy arrays.
+"""CDR, the serialisation of ROS 2 messages, as rmw_fastrtps writes it and rosbag2 stores it:
+an encapsulation header (00 01 00 00: little endian), then the payload, each primitive
+aligned to its size from the start of the payload, strings as a uint32 length (with the
+terminating NUL) and the bytes, sequences as a uint32 count and the elements. One codec for
+the nodes (encoding) and the bags (decoding); test_cdr checks every layout against rclpy's own
+serialisation, test_bags against rosbags'.
 
-Built as rclpy message objects, a JointTrajectory is one Python object per point and field, each
-checked by its setter: most of the estimator's time before the robot gets its plan
+Encoding: JointTrajectory, Path and Float64MultiArray messages filled from numpy arrays.
+Built as rclpy message objects, a JointTrajectory is one Python object per point and field,
+each checked by its setter: most of the estimator's time before the robot gets its plan
 (bench/replan.py measures both ways). Publisher.publish also takes a serialized message, so the
 estimator fills a byte template instead, cached per number of points, where only stamps, times
-and numbers change.
+and numbers change. The numbers go into the template in one compiled call per message
+(io._fast.fill): in the node every callback follows a wait, and a thread woken from a wait
+runs each distinct numpy function several times slower than in a loop (bench/replan.py,
+'after_sleep'); a handful of numpy calls per field cost more than the message.
 
-Encoding: CDR little endian as rmw_fastrtps writes it (encapsulation header 00 01 00 00, each
-primitive aligned to its size from the start of the payload, strings as uint32 length with the
-terminating NUL). test_cdr checks every layout against rclpy's own deserializer.
-
-The numbers go into the template in one compiled call per message: in the node every callback
-follows a wait, and a thread woken from a wait runs each distinct numpy function several times
-slower than in a loop (bench/replan.py, 'after_sleep'); a handful of numpy calls per field cost
-more than the message.
+Decoding: PoseStamped and JointState streams whose messages share one layout (the same size,
+frame id and joint names, as a recorder writes them), read as arrays: every field is then at
+the same offset of every message (pose_stamped_rows, joint_state_rows); None for any other
+stream, which the caller decodes message by message.
 """
 
 import struct
+from typing import Optional, Sequence
 
-import numba
 import numpy as np
 
-_ENCAPSULATION = b'\x00\x01\x00\x00'
-_NS = 1_000_000_000
-_INT32_MIN, _INT32_MAX = -2**31, 2**31 - 1
+from mixture_ip_ros.io._fast import fill
+
+ENCAPSULATION = b'\x00\x01\x00\x00'
+
+
+def aligned(offset: int, size: int) -> int:
+    """The first offset at or after ``offset`` (from the payload start) aligned to ``size``."""
+    return -(-offset // size) * size
 
 
 class _Template:
@@ -33,7 +43,7 @@ class _Template:
         self.buf = bytearray()
 
     def _at(self, align: int, size: int) -> int:
-        start = -len(self.buf) % align + len(self.buf)
+        start = aligned(len(self.buf), align)
         self.buf.extend(bytes(start + size - len(self.buf)))
         return start
 
@@ -62,36 +72,6 @@ class _Template:
         stamp = self.time()
         self.string(frame_id)
         return stamp
-
-
-@numba.njit(cache=True)
-def _put_time(u32, i, ns):
-    """builtin_interfaces Time at u32[i], u32[i + 1]: int32 sec (floor) and uint32 nanosec;
-    False if the seconds are outside int32."""
-    sec = ns // _NS
-    if sec < _INT32_MIN or sec > _INT32_MAX:
-        return False
-    u32[i] = sec & 0xFFFFFFFF
-    u32[i + 1] = ns - sec * _NS
-    return True
-
-
-@numba.njit(cache=True)
-def _fill(u32, f64, value_index, values, stamp_index, stamp_ns, time_index, times_ns):
-    """f64[value_index[f, i, j]] = values[f][i, j] for each array f of the tuple ``values``, the
-    header stamp at stamp_index and times_ns[i] at time_index[i]; False if a time is outside
-    int32 seconds (the buffer is then partly written)."""
-    for k in range(len(values)):
-        a = values[k]
-        for i in range(a.shape[0]):
-            for j in range(a.shape[1]):
-                f64[value_index[k, i, j]] = a[i, j]
-    if not _put_time(u32, stamp_index, stamp_ns):
-        return False
-    for i in range(times_ns.shape[0]):
-        if not _put_time(u32, time_index[i], times_ns[i]):
-            return False
-    return True
 
 
 def _check_shape(name: str, array, shape) -> np.ndarray:
@@ -127,7 +107,7 @@ class _Encoder:
 
     @staticmethod
     def _message(payload) -> bytes:
-        return _ENCAPSULATION + payload.tobytes()
+        return ENCAPSULATION + payload.tobytes()
 
     def _layout(self, n: int):
         raise NotImplementedError
@@ -171,7 +151,7 @@ class JointTrajectoryEncoder(_Encoder):
             ('positions', positions), ('velocities', velocities),
             ('accelerations', accelerations)))
         buf, u32, f64, (stamp, values, times) = self._buffers(n)
-        if not _fill(u32, f64, values, values_in, stamp, stamp_ns, times, times_ns):
+        if not fill(u32, f64, values, values_in, stamp, stamp_ns, times, times_ns):
             raise _int32_error()
         return self._message(buf)
 
@@ -202,7 +182,7 @@ class PathEncoder(_Encoder):
         stamps_ns = np.ascontiguousarray(stamps_ns, dtype=np.int64)
         positions = _check_shape('positions', positions, (stamps_ns.shape[0], 3))
         buf, u32, f64, (stamp, stamps, xyz) = self._buffers(stamps_ns.shape[0])
-        if not _fill(u32, f64, xyz, (positions,), stamp, stamp_ns, stamps, stamps_ns):
+        if not fill(u32, f64, xyz, (positions,), stamp, stamp_ns, stamps, stamps_ns):
             raise _int32_error()
         return self._message(buf)
 
@@ -236,3 +216,114 @@ class Float64MultiArrayEncoder(_Encoder):
         buf, _, f64, first = self._buffers(data.shape[0])
         f64[first:first + data.shape[0]] = data
         return self._message(buf)
+
+
+class _Reader:
+    """Reads a payload's fields in order, as _Template writes them; offsets from the payload
+    start. Raises ValueError past the end of the payload or for a string that is not UTF-8."""
+
+    def __init__(self, payload: bytes):
+        self.data = payload
+        self.offset = 0
+
+    def _at(self, align: int, size: int) -> int:
+        start = aligned(self.offset, align)
+        if start + size > len(self.data):
+            raise ValueError('past the end of the message')
+        self.offset = start + size
+        return start
+
+    def u32(self) -> int:
+        o = self._at(4, 4)
+        return int.from_bytes(self.data[o:o + 4], 'little')
+
+    def string(self) -> str:
+        length = self.u32()
+        o = self._at(1, length)
+        return self.data[o:o + length].rstrip(b'\0').decode()
+
+    def header(self) -> str:
+        """std_msgs Header: the stamp (skipped: see header_stamps) and the frame_id."""
+        self._at(4, 8)
+        return self.string()
+
+    def f64_sequence(self):
+        """A float64[]: (offset of its count, offset of its first element, its length)."""
+        count = self._at(4, 4)
+        n = int.from_bytes(self.data[count:count + 4], 'little')
+        first = self._at(8, 8 * n) if n else self.offset
+        return count, first, n
+
+
+def _same_size_rows(messages) -> Optional[np.ndarray]:
+    """The messages' payloads as one (n, size) uint8 array, or None unless they are all
+    little-endian CDR of one size."""
+    size = len(messages[0])
+    if (size < len(ENCAPSULATION) or any(len(data) != size for data in messages)
+            or bytes(messages[0][:len(ENCAPSULATION)]) != ENCAPSULATION):
+        return None
+    rows = np.frombuffer(b''.join(bytes(data) for data in messages), dtype=np.uint8)
+    return rows.reshape(len(messages), size)[:, len(ENCAPSULATION):]
+
+
+def _field(rows, offset: int, dtype: str, count: int = 1):
+    """``count`` values of ``dtype`` at ``offset`` of every row: (n, count)."""
+    width = np.dtype(dtype).itemsize * count
+    return np.ascontiguousarray(rows[:, offset:offset + width]).view(dtype)
+
+
+def _header_stamps(rows) -> np.ndarray:
+    """header.stamp of every row in ns (int32 sec, uint32 nanosec: the payload's first field)."""
+    return (_field(rows, 0, '<i4')[:, 0].astype(np.int64) * 1_000_000_000
+            + _field(rows, 4, '<u4')[:, 0].astype(np.int64))
+
+
+def _constant(rows, lo: int, hi: int) -> bool:
+    return bool((rows[:, lo:hi] == rows[0, lo:hi]).all())
+
+
+def pose_stamped_rows(messages: Sequence[bytes]):
+    """geometry_msgs/PoseStamped messages that share one layout (the same size and frame id)
+    as arrays: (header stamps ns (n,), positions (n, 3), orientations (n, 4) x y z w, frame id);
+    None for any other messages."""
+    rows = _same_size_rows(messages)
+    if rows is None:
+        return None
+    reader = _Reader(bytes(rows[0]))
+    try:
+        frame = reader.header()
+        end_of_frame = reader.offset
+        pose = reader._at(8, 56)                 # position x y z, orientation x y z w
+    except ValueError:
+        return None
+    if reader.offset != rows.shape[1] or not _constant(rows, 8, end_of_frame):
+        return None
+    values = _field(rows, pose, '<f8', 7)
+    return _header_stamps(rows), values[:, :3].copy(), values[:, 3:].copy(), frame
+
+
+def joint_state_rows(messages: Sequence[bytes], joint_names: Sequence[str]):
+    """sensor_msgs/JointState messages that share one layout (the same size, frame id and
+    names, and as many positions as names) as arrays: (header stamps ns (n,), positions of
+    ``joint_names`` (n, len(joint_names)), their velocities or None where the messages have
+    none); None for any other messages."""
+    rows = _same_size_rows(messages)
+    if rows is None:
+        return None
+    reader = _Reader(bytes(rows[0]))
+    try:
+        reader.header()
+        names = [reader.string() for _ in range(reader.u32())]
+        (p_count, p_start, n_pos), (v_count, v_start, n_vel), (e_count, _, _) = (
+            reader.f64_sequence() for _ in range(3))          # position, velocity, effort
+    except ValueError:
+        return None
+    if (reader.offset != rows.shape[1] or n_pos != len(names)
+            or not set(joint_names) <= set(names) or not _constant(rows, 8, p_start)
+            or not _constant(rows, v_count, v_count + 4)
+            or not _constant(rows, e_count, e_count + 4)):
+        return None
+    index = [names.index(n) for n in joint_names]
+    q = _field(rows, p_start, '<f8', n_pos)[:, index]
+    qd = _field(rows, v_start, '<f8', n_vel)[:, index] if n_vel == len(names) else None
+    return _header_stamps(rows), q, qd
