@@ -5,8 +5,7 @@ function it must equal, and the tests compare them (test_core_fast, test_core_on
 - kalman_update: one observation, every hypothesis; the recursive form of
   promp.weight_posterior (the batch conditioning, eqs. 3-5 and 17-18), equal to rounding;
 - basis_rows: GaussianBasis.__call__ (psi clamped to [0, 1]), equal to rounding;
-- mean_trajectory: the means of interaction.trajectory_distribution, equal to rounding;
-- logsumexp: scipy.special.logsumexp of a 1-D array, bit for bit.
+- mean_trajectory: the means of interaction.trajectory_distribution, equal to rounding.
 
 Kalman update. Per hypothesis h the observed-agent weights have N(mu_h, Sigma_h); the
 observation y = (I_P kron psi_h^T) w + e, e ~ N(0, diag(noise)). The update factors
@@ -34,7 +33,6 @@ import numpy as np
 from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic, models, overload, register_model
-from scipy import special
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
 
@@ -407,19 +405,3 @@ def mean_trajectory(weights, z, centers, width, alpha):
                     acc[t, j] += alpha * alpha * ddpsi * weights[j, i]
     return pos, vel, acc
 
-
-def logsumexp(a: np.ndarray) -> float:
-    """scipy.special.logsumexp of a real 1-D array, with its operations in its order (the
-    largest terms apart: log1p of the others' sum scaled by their count, plus the log of that
-    count, plus the largest), so the same value bit for bit; without the array-API layers that
-    make scipy's take hundreds of microseconds per call on a few hundred numbers. Anything but
-    a finite maximum goes to scipy."""
-    a_max = a.max()
-    if not np.isfinite(a_max):
-        return float(special.logsumexp(a))
-    is_max = a == a_max
-    m = float(np.count_nonzero(is_max))
-    s = np.exp(np.where(is_max, -np.inf, a) - a_max).sum()
-    if s != 0:
-        s = s / m
-    return float(np.log1p(s) + np.log(m) + a_max)

@@ -13,8 +13,8 @@ on the observed weights alone, w_c | D follows from w_o | D through B_k = Sigma_
 import numpy as np
 from scipy import linalg
 
-from ._fast import (W, basis_rows, compact_lanes, from_lanes, kalman_update, logsumexp,
-                    mean_trajectory, to_lanes, tri_index)
+from ._fast import (W, basis_rows, compact_lanes, from_lanes, kalman_update, mean_trajectory,
+                    to_lanes, tri_index)
 from .interaction import trajectory_distribution
 from .numerics import logsumexp
 from .phase import alpha_grid, alpha_log_prior
