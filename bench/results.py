@@ -224,9 +224,30 @@ def page(R: dict) -> str:
                      f"{t['chosen']}, floor {t['prior_scale']}), the straightforward loop "
                      f"{t.get('reference', {}).get('train_s', float('nan')):.2f} s, same "
                      f"selection: {t.get('same_selection')}.")
-        for k in ('estimator', 'sim', 'soak'):
-            if R.get(k):
-                L.append(f'- `{k}.py`: `{json.dumps(R[k])[:600]}`')
+        e = R.get('estimator')
+        if e:
+            L.append(f"- `estimator.py`: one observation absorbed by the online estimator "
+                     f"({e['hypotheses']} hypotheses, observed weights of dimension "
+                     f"{e['observed_weight_dim']}): median {e['update_us_median']:.0f} us, 99th "
+                     f"percentile {e['update_us_p99']:.0f} us ({e['pruned']['update_us_median']:.0f}"
+                     f" us once unlikely hypotheses are pruned); batch conditioning after 500 "
+                     f"observations {e['naive_us_m500'] / 1e6:.1f} s.")
+        s = R.get('sim')
+        if s:
+            L.append(f"- `sim.py`: MuJoCo + Pinocchio controller {s['step_us_total']:.1f} us per "
+                     f"1 kHz step ({s['realtime_factor']:.0f}x real time); the sim node "
+                     f"{s['node_realtime_factor']:.1f}x, its executable "
+                     f"{s['executable_realtime_factor']:.1f}x, joint states every "
+                     f"{s['node_joint_state_max_gap_s'] * 1e3:.0f} ms of simulated time at most.")
+        k = R.get('soak')
+        if k:
+            L.append(f"- `soak.py`: {k['soak_s'] / 60:.0f} min of {k['rate_hz']:.0f} Hz mocap with "
+                     f"{k['load']} busy processes beside it: {k['commits_on_reaches']}/"
+                     f"{k['reaches']} reaches committed, {k['commits_on_returns']} commitments on "
+                     f"returns and {k['commits_on_transitions']} on transitions, "
+                     f"{k['trajectories']} trajectories, {k['points_beyond_limits']} points beyond "
+                     f"limits; estimator memory {k['rss_mb_start_estimator']:.0f} -> "
+                     f"{k['rss_mb_end_estimator']:.0f} MB.")
         L.append('')
     return '\n'.join(L)
 
