@@ -10,7 +10,8 @@ from scipy.stats import multivariate_normal, norm
 from conftest import heldout_loglik
 from mixture_ip_ros.core.basis import GaussianBasis
 from mixture_ip_ros.core.demonstration import Demonstration
-from mixture_ip_ros.core.mixture import COMPLETION_FRACTIONS, MixtureIProMP
+from mixture_ip_ros.core.mixture import MixtureIProMP
+from mixture_ip_ros.core.selection import COMPLETION_FRACTIONS
 from mixture_ip_ros.core.selection import (calibrated_heldout_curves, controlled_rms, cv_folds,
                                            score_completion, selection_curve)
 from mixture_ip_ros.core.promp import (log_evidence, observation_stats, stack_stats,

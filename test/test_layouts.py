@@ -14,7 +14,8 @@ from mixture_ip_ros.app.evaluation import prepare
 from mixture_ip_ros.app.training import train, train_to_file
 from mixture_ip_ros.core.basis import GaussianBasis
 from mixture_ip_ros.core.demonstration import Demonstration, Layout
-from mixture_ip_ros.core.mixture import MixtureIProMP, PRIOR_SCALES
+from mixture_ip_ros.core.mixture import MixtureIProMP
+from mixture_ip_ros.core.selection import PRIOR_SCALES
 from mixture_ip_ros.core.selection import loo_rms_by_components, selection_curve
 from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.core.promp import observation_stats

@@ -29,9 +29,10 @@ from pathlib import Path
 import numpy as np
 
 from mixture_ip_ros.core.demonstration import Layout
-from mixture_ip_ros.core.mixture import MixtureIProMP, PRIOR_SCALES
-from mixture_ip_ros.core.selection import (calibrated_heldout_curves, loo_rms_by_components,
-                                           prepare_for_cv, selection_curve)
+from mixture_ip_ros.core.mixture import MixtureIProMP
+from mixture_ip_ros.core.selection import (PRIOR_SCALES, calibrated_heldout_curves,
+                                           loo_rms_by_components, prepare_for_cv,
+                                           selection_curve)
 from mixture_ip_ros.core.patterns import PatternSpace, heldout_curve
 from mixture_ip_ros.core.novelty import calibrate as calibrate_novelty
 from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE, bag_layout

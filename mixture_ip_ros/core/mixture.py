@@ -11,7 +11,6 @@ use each demonstration's marginal likelihood p(D_i | k) and the M step adds the 
 posterior covariances (eqs. 27-30 per component).
 """
 
-import inspect
 from typing import NamedTuple
 
 import numpy as np
@@ -53,30 +52,6 @@ class Prepared(NamedTuple):
     def take(self, idx) -> 'Prepared':
         return Prepared(self.stats.take(idx), self.W[idx], self.sq[idx], self.alphas[idx],
                         self.timing[idx], self.n_observed, self.acov[idx], self.periods[idx])
-
-
-# Where the completion criterion cuts a held-out demonstration into the beginning it observes
-# and the rest it predicts: the fractions recognition is reported at (app.evaluation), spread
-# over the movement so that no single cut decides.
-COMPLETION_FRACTIONS = (0.3, 0.5, 0.7)
-
-
-def beginning_stats(basis, demos, fractions):
-    """Per fraction f, the stacked statistics of every demonstration's beginning: its samples
-    (every DOF of both agents) at phases z <= f."""
-    out = []
-    for f in fractions:
-        out.append(stack_stats([observation_stats(basis, d.phase[d.phase <= f],
-                                                  np.hstack([d.observed, d.controlled])[
-                                                      d.phase <= f]) for d in demos]))
-    return out
-
-
-def checked_fractions(fractions):
-    f = np.atleast_1d(np.asarray(fractions, dtype=float))
-    if f.ndim != 1 or f.size == 0 or not np.all((f > 0) & (f < 1)):
-        raise ValueError(f'fractions must be numbers in (0, 1), got {fractions!r}')
-    return tuple(float(x) for x in f)
 
 
 class MixtureIProMP:
@@ -540,9 +515,3 @@ def _validate_observation(z, Y, n_observed):
         raise ValueError('observation contains Inf')
     return z, Y
 
-
-# Covariance floors training calibrates over (core.selection), as fractions of the within-
-# component variance per weight: half decades wide enough for every scenario evaluated (their
-# optima range from 3e-4, smooth generated reaches, to 1, letters and sampled covariances).
-PRIOR_SCALES = tuple(float(f'{10.0 ** e:.3g}') for e in np.arange(0.5, -4.01, -0.5))
-DEFAULT_PRIOR_SCALE = inspect.signature(MixtureIProMP).parameters['prior_scale'].default

@@ -20,11 +20,39 @@ import numpy as np
 from .basis import GaussianBasis
 from .demonstration import Demonstration
 from .interaction import trajectory_distribution
-from .mixture import (COMPLETION_FRACTIONS, PRIOR_SCALES, MixtureIProMP, Prepared,
-                      beginning_stats, checked_fractions)
+from .mixture import MixtureIProMP, Prepared
 from .numerics import logsumexp_rows
 from .phase import alpha_log_density
 from .promp import ObservationStats, log_evidence, observation_stats, stack_stats
+
+
+# Covariance floors training calibrates over, as fractions of the within-
+# component variance per weight: half decades wide enough for every scenario evaluated (their
+# optima range from 3e-4, smooth generated reaches, to 1, letters and sampled covariances).
+PRIOR_SCALES = tuple(float(f'{10.0 ** e:.3g}') for e in np.arange(0.5, -4.01, -0.5))
+
+# Where the completion criterion cuts a held-out demonstration into the beginning it observes
+# and the rest it predicts: the fractions recognition is reported at (app.evaluation), spread
+# over the movement so that no single cut decides.
+COMPLETION_FRACTIONS = (0.3, 0.5, 0.7)
+
+
+def beginning_stats(basis, demos, fractions):
+    """Per fraction f, the stacked statistics of every demonstration's beginning: its samples
+    (every DOF of both agents) at phases z <= f."""
+    out = []
+    for f in fractions:
+        out.append(stack_stats([observation_stats(basis, d.phase[d.phase <= f],
+                                                  np.hstack([d.observed, d.controlled])[
+                                                      d.phase <= f]) for d in demos]))
+    return out
+
+
+def checked_fractions(fractions):
+    f = np.atleast_1d(np.asarray(fractions, dtype=float))
+    if f.ndim != 1 or f.size == 0 or not np.all((f > 0) & (f < 1)):
+        raise ValueError(f'fractions must be numbers in (0, 1), got {fractions!r}')
+    return tuple(float(x) for x in f)
 
 
 def loo_rms_by_components(demonstrations, candidates, observe: str = 'final', progress=None,

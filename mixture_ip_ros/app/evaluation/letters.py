@@ -14,7 +14,7 @@ from scipy import linalg
 
 from mixture_ip_ros.app.evaluation.common import (EvalConfig, feed_until, observed_prediction,
                                                   trained, with_default_noise)
-from mixture_ip_ros.core.mixture import DEFAULT_PRIOR_SCALE
+from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.core.promp import observation_stats, ridge_weights, weight_posterior
 from mixture_ip_ros.scenarios.letters import LETTER_OBSERVATION_NOISE
@@ -117,7 +117,7 @@ def evaluate_missing_data(data, out_dir: Path, config: EvalConfig = None) -> dic
     out_dir.mkdir(parents=True, exist_ok=True)
     # Both at the same, configured floor: the experiment compares two ways of learning from
     # gaps (and training keeps the configured floor for EM, see training.train).
-    floor = {'prior_scale': config.model.get('prior_scale', DEFAULT_PRIOR_SCALE)}
+    floor = {'prior_scale': config.model.get('prior_scale', MixtureIProMP().prior_scale)}
     models = {m: trained(data.train, config, n_components=1, method=m, **floor)[0]
               for m in ('em', 'regression')}
     tables = {m: _letter_rms_table(models[m], data.test, config) for m in models}
