@@ -336,7 +336,8 @@ def select_n_components(scores, higher_is_better: bool = False, paired: bool = F
     return selection_curve(scores, higher_is_better, paired)['index']
 
 
-def selection_curve(scores, higher_is_better: bool = False, paired: bool = False):
+def selection_curve(scores, higher_is_better: bool = False, paired: bool = False,
+                    choose=None):
     """The K choice and its evidence from per-demonstration scores (candidates, n).
 
     Plateau rule: the smallest K within one standard error of the best K's scores (the
@@ -350,6 +351,10 @@ def selection_curve(scores, higher_is_better: bool = False, paired: bool = False
     Whether the curve has a clear optimum (paired differences, two standard errors): the chosen
     K beats the first candidate, or the first candidate is chosen and beats every other.
     Otherwise the curve is flat within its noise and the note says so.
+
+    ``choose``: a second criterion among the candidates the curve cannot tell apart, given
+    their indices (the plateau; ``paired`` only), returning the index chosen; by default the
+    smallest.
     Returns a dict: index, mean, se (per candidate), clear (bool), note (str).
     """
     s = np.asarray(scores, dtype=float)
@@ -365,7 +370,12 @@ def selection_curve(scores, higher_is_better: bool = False, paired: bool = False
         within = _not_significantly_worse(g)
     else:
         within = g.mean(axis=1) >= g[best].mean() - se[best]
-    index = int(np.flatnonzero(within)[0])
+    if choose is not None and not paired:
+        raise ValueError('choose needs the paired plateau')
+    plateau = np.flatnonzero(within)
+    index = int(plateau[0] if choose is None else choose(plateau.tolist()))
+    if index not in plateau:
+        raise ValueError(f'choose returned {index}, not one of the plateau {plateau.tolist()}')
 
     def beats(a, b):
         d = g[a] - g[b]
