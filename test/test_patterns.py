@@ -7,8 +7,9 @@ import pytest
 
 from mixture_ip_ros.core.basis import GaussianBasis
 from mixture_ip_ros.core.mixture import MixtureIProMP
-from mixture_ip_ros.core.patterns import (PatternMixture, PatternSpace, heldout_curve,
-                                          path_coordinates)
+from mixture_ip_ros.core.patterns import (PatternMixture, PatternSpace, adjusted_rand_index,
+                                          heldout_curve, partition_stability, path_coordinates)
+from mixture_ip_ros.core.selection import selection_curve
 from mixture_ip_ros.scenarios.synthetic import mixture_demos
 
 
@@ -135,3 +136,41 @@ def test_sampled_patterns_are_found_and_their_number_chosen():
     model, info = train(demos, candidates=range(1, 6), n_basis=8)
     assert info['n_components'] == 3 and info['selection']['clear_optimum']
     assert adjusted_rand_score(labels, model.resp_.argmax(axis=1)) == 1.0
+
+
+def test_the_adjusted_rand_index_is_scikit_learns():
+    from sklearn.metrics import adjusted_rand_score
+    rng = np.random.default_rng(0)
+    for n, ka, kb in [(30, 3, 4), (12, 2, 2), (50, 6, 1), (7, 1, 1), (20, 5, 5)]:
+        a, b = rng.integers(ka, size=n), rng.integers(kb, size=n)
+        for x, y in [(a, b), (a, a), (a, (a + 1) % ka)]:
+            assert adjusted_rand_index(x, y) == pytest.approx(adjusted_rand_score(x, y),
+                                                              abs=1e-12)
+
+
+def test_a_partition_the_data_hold_is_reproducible_and_an_arbitrary_one_is_not():
+    """Three equidistant clusters: three components find them from every subsample; two must
+    merge a pair of them, and which pair each subsample merges is arbitrary; four split one of
+    them where its members happen to fall."""
+    rng = np.random.default_rng(3)
+    centres = 4 * np.array([[0, 0], [1, 0], [0.5, np.sqrt(0.75)]])
+    X = np.vstack([c + rng.normal(0, 0.3, (15, 2)) for c in centres])
+    S = partition_stability(X, [1, 2, 3, 4], n_pairs=20)
+    assert S.shape == (4, 20)
+    assert np.all(S[0] == 1) and np.all(S[2] == 1)
+    assert S[1].mean() < 0.8 and S[3].mean() < 0.95
+
+
+def test_the_plateau_keeps_the_smallest_k_whose_partition_is_as_reproducible():
+    """Held-out scores that cannot tell K = 2..4 apart: by default the smallest; with a second
+    criterion, its choice among those three only."""
+    rng = np.random.default_rng(0)
+    base = rng.normal(0, 1, 40)
+    scores = np.vstack([base - 5, base, base, base, base - 5])
+    assert selection_curve(scores, True, paired=True)['index'] == 1
+    seen = []
+    curve = selection_curve(scores, True, paired=True,
+                            choose=lambda plateau: seen.append(plateau) or plateau[-1])
+    assert seen == [[1, 2, 3]] and curve['index'] == 3
+    with pytest.raises(ValueError):
+        selection_curve(scores, True, paired=True, choose=lambda plateau: 0)

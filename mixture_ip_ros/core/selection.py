@@ -334,7 +334,7 @@ def calibrated_heldout_curves(demonstrations, candidates, fractions=COMPLETION_F
     for name, S in scores.items():
         if name == 'controlled_rms':
             mean = np.nanmean(S, axis=2)
-            allowed = np.column_stack([_not_significantly_worse(scores['loglik'][:, a])
+            allowed = np.column_stack([not_significantly_worse(scores['loglik'][:, a])
                                        for a in range(len(candidates))])
             best = np.argmin(np.where(allowed, mean, np.inf), axis=0)
         else:
@@ -347,14 +347,14 @@ def calibrated_heldout_curves(demonstrations, candidates, fractions=COMPLETION_F
     return out
 
 
-def _not_significantly_worse(g):
+def not_significantly_worse(g, n_se: float = 2.0):
     """Mask of the rows of ``g`` (options, n; per-demonstration scores, higher is better) whose
-    paired difference to the best row is within two standard errors: the options the data
+    paired difference to the best row is within ``n_se`` standard errors: the options the data
     cannot tell from the best."""
     d = g[np.argmax(g.mean(axis=1))] - g
     n = g.shape[1]
     se = d.std(axis=1, ddof=1) / np.sqrt(n) if n > 1 else np.zeros(len(g))
-    return d.mean(axis=1) <= 2 * se
+    return d.mean(axis=1) <= n_se * se
 
 
 def select_n_components(scores, higher_is_better: bool = False, paired: bool = False):
@@ -364,7 +364,8 @@ def select_n_components(scores, higher_is_better: bool = False, paired: bool = F
     return selection_curve(scores, higher_is_better, paired)['index']
 
 
-def selection_curve(scores, higher_is_better: bool = False, paired: bool = False):
+def selection_curve(scores, higher_is_better: bool = False, paired: bool = False,
+                    choose=None):
     """The K choice and its evidence from per-demonstration scores (candidates, n).
 
     Plateau rule: the smallest K within one standard error of the best K's scores (the
@@ -378,6 +379,10 @@ def selection_curve(scores, higher_is_better: bool = False, paired: bool = False
     Whether the curve has a clear optimum (paired differences, two standard errors): the chosen
     K beats the first candidate, or the first candidate is chosen and beats every other.
     Otherwise the curve is flat within its noise and the note says so.
+
+    ``choose``: a second criterion among the candidates the curve cannot tell apart, given
+    their indices (the plateau; ``paired`` only), returning the index chosen; by default the
+    smallest.
     Returns a dict: index, mean, se (per candidate), clear (bool), note (str).
     """
     s = np.asarray(scores, dtype=float)
@@ -390,10 +395,15 @@ def selection_curve(scores, higher_is_better: bool = False, paired: bool = False
     se = np.array([se_of(r) for r in s])
     best = int(np.argmax(g.mean(axis=1)))
     if paired:
-        within = _not_significantly_worse(g)
+        within = not_significantly_worse(g)
     else:
         within = g.mean(axis=1) >= g[best].mean() - se[best]
-    index = int(np.flatnonzero(within)[0])
+    if choose is not None and not paired:
+        raise ValueError('choose needs the paired plateau')
+    plateau = np.flatnonzero(within)
+    index = int(plateau[0] if choose is None else choose(plateau.tolist()))
+    if index not in plateau:
+        raise ValueError(f'choose returned {index}, not one of the plateau {plateau.tolist()}')
 
     def beats(a, b):
         d = g[a] - g[b]
