@@ -21,7 +21,8 @@ def logsumexp_rows(a) -> np.ndarray:
     if not finite.all():
         out = np.empty(len(a))
         out[~finite] = _scipy_logsumexp(a[~finite], axis=1)
-        out[finite] = logsumexp_rows(a[finite]) if finite.any() else out[finite]
+        if finite.any():
+            out[finite] = logsumexp_rows(a[finite])
         return out
     is_max = a == top[:, None]
     m = np.count_nonzero(is_max, axis=1).astype(float)
