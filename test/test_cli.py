@@ -14,6 +14,8 @@ from mixture_ip_ros.app.cli import main
     (['train', '{tmp}', '--out', '{tmp}/m.npz', '--n-basis', '1'], '--n-basis: 1 is not >= 2'),
     (['train', '{tmp}', '--out', '{tmp}/m.npz', '--max-components', 'six'],
      "--max-components: 'six' is not a whole number"),
+    (['train', '{tmp}', '--out', '{tmp}/m.npz', '--cut', 'manual'],
+     "--cut: invalid choice: 'manual'"),
     (['evaluate', '--scenario', 'pole', '--out', '{tmp}/eval', '--bags', '{tmp}/none'],
      '--bags: {tmp}/none is not a folder'),
     (['evaluate', '--scenario', 'pole', '--out', '{tmp}/file.txt'], 'is a file, not a folder'),
@@ -41,3 +43,15 @@ def test_a_run_time_error_is_one_line_and_exit_1(tmp_path, capsys):
     assert main(['train', str(tmp_path / 'empty'), '--out', str(tmp_path / 'm.npz')]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith('mixture-ip train: error:') and not (tmp_path / 'm.npz').exists()
+
+
+def test_training_on_the_recorded_cut_needs_bags_that_record_it(tmp_path, capsys):
+    import numpy as np
+    from mixture_ip_ros.io.bags import write_demonstration_bag
+    t = np.arange(0.0, 2.0, 0.01)
+    wrist = np.column_stack([0.5 + 0.2 * np.sin(t), 0.1 * t, 0.3 + 0 * t])
+    write_demonstration_bag(tmp_path / 'bags' / 'one', t, wrist, t, np.zeros((t.size, 7)))
+    assert main(['train', str(tmp_path / 'bags'), '--cut', 'recorded',
+                 '--out', str(tmp_path / 'm.npz')]) == 1
+    err = capsys.readouterr().err
+    assert 'no recorded movement interval' in err and not (tmp_path / 'm.npz').exists()

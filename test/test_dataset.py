@@ -185,3 +185,23 @@ def test_load_dataset_empty_or_all_bad(tmp_path):
     (tmp_path / 'bad' / 'x' / 'x.mcap').write_bytes(b'junk')
     with pytest.raises(ValueError, match='none of the 1 bags'):
         load_dataset(tmp_path / 'bad')
+
+
+def test_a_recorded_cut_is_used_where_asked_for_and_required_then(tmp_path):
+    """cut='recorded': the bag's own onset and end (its annotator's), not the detector's; the
+    rows are the same samples as the detector's cut would give at those times."""
+    onset, end = REST0 + 0.1, REST0 + MOVE - 0.2
+    bag, _ = _bag(tmp_path / 'cut', segment=(onset, end))
+    demo = load_demonstration(bag, transform=TF, cut='recorded')
+    assert demo.duration == pytest.approx(end - onset, abs=1e-9)
+    np.testing.assert_allclose(demo.observed, truth_wrist(onset + demo.t), atol=1e-9)
+    np.testing.assert_allclose(demo.controlled, truth_joints(onset + demo.t), atol=1e-9)
+    detected = load_demonstration(bag, transform=TF)
+    assert detected.duration == pytest.approx(MOVE, abs=0.06)
+    plain, _ = _bag(tmp_path / 'plain')
+    with pytest.raises(BagError, match='no recorded movement interval'):
+        load_demonstration(plain, transform=TF, cut='recorded')
+    with pytest.raises(ValueError, match="cut must be 'detected' or 'recorded'"):
+        load_demonstration(bag, transform=TF, cut='annotated')
+    with pytest.raises(ValueError, match='onset < end'):
+        _bag(tmp_path / 'bad', segment=(end, onset))

@@ -101,10 +101,15 @@ def test_the_four_interactions_of_real_people_are_found_without_labels(nuisi_v2)
     out, m = nuisi_v2
     assert all(k in m for k in KEYS)
     assert m['n_recordings'] == 44 and len(m['interactions']) == 4
-    # K inside each fold, from its 35 training recordings: 4 +- 1
-    assert sum(3 <= k <= 5 for k in m['n_components_selected']) >= 4
-    assert m['ari'] >= 0.75 and m['heldout_ari'] >= 0.6
-    assert m['recognition_accuracy_by_fraction']['1'] >= 0.75
+    # K inside each fold, from its 35 training recordings (found: 3, 3, 4, 4, 4, where three
+    # is within a standard error of four; ARI 0.90, held-out 0.84, recognised at half the
+    # movement 82 %, with K = 4 given 95 %)
+    assert sum(3 <= k <= 5 for k in m['n_components_selected']) == 5
+    assert sum(k == 4 for k in m['n_components_selected']) >= 3
+    assert m['ari'] >= 0.85 and m['heldout_ari'] >= 0.75
+    assert m['recognition_accuracy_by_fraction']['0.5'] >= 0.75
+    assert m['true_k_accuracy_by_fraction']['0.5'] >= 0.9
+    assert m['recognition_accuracy_by_fraction']['1'] >= 0.85
     assert m['supervised_accuracy_by_fraction']['0.5'] >= 0.9
     # the accuracy per interaction averages, weighted by their recordings, to the overall one
     counts = {'handshake': 11, 'parachute_fistbump': 9, 'rocket_fistbump': 12, 'waving': 12}

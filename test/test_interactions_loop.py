@@ -2,10 +2,8 @@
 replayed from rosbag2 bags through the real nodes (bag_player -> observer -> estimator -> sim)
 on simulated time, the iiwa in the partner's place.
 
-The model is the supervised one (one component per interaction, the labels read): this tests
-the loop (replay, segmentation, commitment, the arm answering within its limits), not pattern
-discovery, whose K on these recordings is another issue's (the demo's model is unsupervised).
-The shortest held-out recording of each interaction is replayed at twice real time (the nodes
+The model is the demo's: trained without labels on the retargeted training split, K chosen
+(it finds the four interactions; labels only name its components). The shortest held-out recording of each interaction is replayed at twice real time (the nodes
 run on simulated time, so only the wall-clock time changes): about 35 s of replay.
 """
 
@@ -25,7 +23,7 @@ def report(tmp_path_factory):
         pytest.skip('NuiSI is not in the user cache (./dev seeds it from ../shared/data/nuisi)')
     from mixture_ip_ros.app import interactions as app
     root = tmp_path_factory.mktemp('interactions')
-    scene, model_path, info = app.prepare(root / 'bags', root, 'iiwa14', supervised=True)
+    scene, model_path, info = app.prepare(root / 'bags', root, 'iiwa14')
     shortest = {}
     for r in nuisi.recordings('v2', 'test'):
         if r.label not in shortest or len(r.t) < len(shortest[r.label].t):
@@ -37,6 +35,7 @@ def report(tmp_path_factory):
 
 
 def test_each_interaction_is_recognised_before_its_end(report):
+    assert report['n_components'] == 4
     rows = report['interactions']
     assert sorted(r['true_pattern'] for r in rows) == sorted(nuisi.VERSIONS['v2'].interactions)
     for r in rows:

@@ -90,7 +90,7 @@ def _train(args):
                              'the robot joints')
         demos, skipped = load_dataset(args.bag_dir, on_error=args.on_error,
                                       joint_names=robot.joint_names,
-                                      transform=robot.world_to_base())
+                                      transform=robot.world_to_base(), cut=args.cut)
         for s in skipped:
             print(f'skipped {s.path}: {s.reason}', file=sys.stderr)
         layout = None
@@ -278,6 +278,10 @@ def build_parser():
     t.add_argument('--method', choices=['regression', 'em'], default='regression',
                    help="'em' learns from demonstrations with missing data (occlusions)")
     t.add_argument('--on-error', choices=['skip', 'raise'], default='skip')
+    t.add_argument('--cut', choices=['detected', 'recorded'], default='detected',
+                   help="bags: each demonstration from the onset to the end the observer finds, "
+                        "or ('recorded') the ones its bag records (mixture_ip_ros.onset_ns / "
+                        "end_ns in its metadata custom_data: an annotated data set)")
     _add_robot(t)
     t.set_defaults(func=_train)
 

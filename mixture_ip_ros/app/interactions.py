@@ -42,12 +42,16 @@ def default_paths(robot) -> tuple:
     return root / 'bags', root / 'demo'
 
 
-def loading(scene) -> dict:
-    """How the scenario's bags become demonstrations: in the base frame, the robot's joints,
-    segmented with the observer's settings of the scenario, at the recordings' rate."""
+def loading(scene, cut: str = 'recorded') -> dict:
+    """How the scenario's bags become demonstrations: in the base frame, the robot's joints, at
+    the recordings' rate; cut where NuiSI's authors cut the interaction (``'recorded'``, for
+    training: the observer's ends, which only set a training demonstration's duration, come up
+    to a second early where a person slows down before the annotated end, and with them the
+    rocket fist-bumps split in two and K = 2 was chosen), or where the observer finds the
+    movement with the scenario's settings (``'detected'``: what the nodes see online)."""
     robot = scene.robot
     return {'transform': robot.world_to_base(), 'joint_names': robot.joint_names,
-            'segmentation': interactions.segmentation(scene.config),
+            'segmentation': interactions.segmentation(scene.config), 'cut': cut,
             'dt': 1.0 / nuisi.VERSIONS[scene.config.data].rate}
 
 
@@ -146,7 +150,7 @@ def offline_errors(model, scene, recording, bag, fraction: float) -> dict:
     against where the partner's hand was: RMS over the rest of the movement, and at its end
     (z = 1) against the partner's last position (cm). The movement is the one the observer
     finds (the bag segmented as training segments it)."""
-    opts = loading(scene)
+    opts = loading(scene, cut='detected')
     demo = load_demonstration(bag, **opts)
     _, t_onset, _ = segment_recording(read_bag(bag, joint_names=scene.robot.joint_names),
                                       transform=opts['transform'],

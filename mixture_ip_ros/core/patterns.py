@@ -127,16 +127,25 @@ class PatternMixture:
     ``floor`` times each coordinate's variance keeps them positive definite.
 
     EM from k-means++ starts (core.kmeans), ``n_init`` of them, the one with the
-    highest log-likelihood kept; or from given responsibilities (``fit(X, resp=...)``). EM stops
+    highest log-likelihood kept among those whose every component is the most probable one for
+    at least ``min_members`` demonstrations (any, if none is); or from given responsibilities
+    (``fit(X, resp=...)``). A component of one demonstration is the mixture's classic spurious
+    maximum (McLachlan and Peel 2000, sec. 3.10): one atypical demonstration sits at its own
+    mean with a covariance that is all prior, and the likelihood it gains there outweighs
+    keeping two real patterns apart (NuiSI v2: one slow rocket fist-bump alone, handshake and
+    parachute fist-bump merged, in 3 of 5 folds). A pattern is something shown at least twice.
+    EM stops
     when the log-likelihood gains less than ``tol`` relative or after ``max_iter`` iterations.
     Fitted: ``weights_`` (K,), ``means_`` (K, q), ``covariances_`` (K, q, q), ``resp_`` (n, K),
     ``log_likelihood_`` (of the training data, under the fitted model), ``n_iter_``.
     """
 
     def __init__(self, n_components: int, prior_strength: float = 10.0, floor: float = 1e-6,
-                 n_init: int = 10, random_state=0, max_iter: int = 200, tol: float = 1e-9):
+                 n_init: int = 10, random_state=0, max_iter: int = 200, tol: float = 1e-9,
+                 min_members: int = 2):
         self.n_components = n_components
         self.prior_strength = prior_strength
+        self.min_members = min_members
         self.floor = floor
         self.n_init = n_init
         self.random_state = random_state
@@ -150,6 +159,8 @@ class PatternMixture:
         K = int(self.n_components)
         if not 1 <= K <= len(X):
             raise ValueError(f'n_components must be in 1..{len(X)}, got {self.n_components!r}')
+        if int(self.min_members) != self.min_members or self.min_members < 1:
+            raise ValueError(f'min_members must be a positive integer, got {self.min_members!r}')
         self._floor = self.floor * np.maximum(X.var(axis=0), 1e-300)
         if resp is not None:
             starts = [np.asarray(resp, dtype=float)]
@@ -159,11 +170,14 @@ class PatternMixture:
             rng = np.random.default_rng(self.random_state)
             seeds = rng.integers(2 ** 31, size=self.n_init)
             starts = [np.eye(K)[kmeans(X, K, random_state=int(s), n_init=1)] for s in seeds]
-        best = None
+        enough = min(int(self.min_members), len(X) // K)
+        best, best_key = None, None
         for R in starts:
             result = self._em(X, R)
-            if best is None or result[0] > best[0]:
-                best = result
+            members = np.bincount(np.argmax(result[2], axis=1), minlength=K)
+            key = (bool(members.min() >= enough), result[0])
+            if best is None or key > best_key:
+                best, best_key = result, key
         self.log_likelihood_, params, self.resp_, self.n_iter_ = best
         self.weights_, self.means_, self.covariances_ = params
         self._chols = [np.linalg.cholesky(c) for c in self.covariances_]

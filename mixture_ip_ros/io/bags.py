@@ -12,7 +12,10 @@ driver that stops publishing while the marker is hidden.
 
 The pattern label (evaluation only, no learner may read it) is stored in the bag's metadata
 ``custom_data`` under the key ``mixture_ip_ros.label``, not on a topic: a player replaying the bag then
-cannot leak it to the estimator, and ``ros2 bag`` keeps it when it rewrites metadata.
+cannot leak it to the estimator, and ``ros2 bag`` keeps it when it rewrites metadata. Where the
+demonstration's movement interval is known (an annotated data set, a generated scenario), its
+onset and end stamps (ns) are kept there too (``mixture_ip_ros.onset_ns`` / ``end_ns``), for
+training to cut the demonstration where its annotator did (io.dataset, ``cut='recorded'``).
 
 Every problem with a bag (not a bag, missing topic, empty topic, wrong message type, unreadable or
 truncated storage, undecodable message, joints missing from the JointState) raises :class:`BagError`
@@ -38,6 +41,8 @@ JOINT_TOPIC = '/joint_states'
 WRIST_TYPE = 'geometry_msgs/msg/PoseStamped'
 JOINT_TYPE = 'sensor_msgs/msg/JointState'
 LABEL_KEY = 'mixture_ip_ros.label'
+ONSET_KEY = 'mixture_ip_ros.onset_ns'
+END_KEY = 'mixture_ip_ros.end_ns'
 STORAGES = ('mcap', 'sqlite3')
 BAG_VERSION = 9
 # Deterministic default start (2023-11-14T22:13:20Z) so a seeded scenario gives byte-identical bags.
@@ -141,12 +146,14 @@ def write_demonstration_bag(path, wrist_t, wrist_xyz, joint_t, joint_q, *,
                             wrist_quat=None,
                             joint_qd=None,
                             start_time_ns: int = DEFAULT_START_TIME_NS,
-                            custom_data: Optional[Mapping[str, str]] = None) -> Path:
+                            custom_data: Optional[Mapping[str, str]] = None,
+                            segment: Optional[tuple] = None) -> Path:
     """Write one demonstration as a rosbag2 (version 9) directory at ``path`` and return it.
 
     ``wrist_t`` (N,) and ``joint_t`` (M,) are seconds since ``start_time_ns``; ``wrist_xyz`` (N, 3)
     metres in ``frame_id``; wrist rows that are NaN are not written (occlusion = no message).
-    ``joint_q`` (M, J) radians, optional ``joint_qd`` (M, J) rad/s. ``path`` must not exist.
+    ``joint_q`` (M, J) radians, optional ``joint_qd`` (M, J) rad/s. ``segment``: the movement's
+    (onset, end), seconds on the same time base, where it is known. ``path`` must not exist.
     """
     from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 
@@ -186,6 +193,13 @@ def write_demonstration_bag(path, wrist_t, wrist_xyz, joint_t, joint_q, *,
         raise ValueError('joint_t is empty')
     if wrist_topic == joint_topic:
         raise ValueError(f'wrist and joint topics must differ, both are {wrist_topic!r}')
+    custom_data = dict(custom_data or {})
+    if segment is not None:
+        onset, end = (float(x) for x in segment)
+        if not (np.isfinite(onset) and np.isfinite(end) and onset < end):
+            raise ValueError(f'segment must be a finite (onset, end) with onset < end, got {segment!r}')
+        onset_ns, end_ns = _stamp_ns(start_time_ns, [onset, end])
+        custom_data.update({ONSET_KEY: str(int(onset_ns)), END_KEY: str(int(end_ns))})
 
     ts = typestore()
     Time = ts.types['builtin_interfaces/msg/Time']
@@ -219,7 +233,7 @@ def write_demonstration_bag(path, wrist_t, wrist_xyz, joint_t, joint_q, *,
     plugin = StoragePlugin.MCAP if storage == 'mcap' else StoragePlugin.SQLITE3
     writer = Writer(path, version=BAG_VERSION, storage_plugin=plugin)
     try:
-        for key, value in (custom_data or {}).items():
+        for key, value in custom_data.items():
             writer.set_custom_data(str(key), str(value))
         if label is not None:
             writer.set_custom_data(LABEL_KEY, str(label))

@@ -5,6 +5,10 @@ drop the samples the observer drops as no person's wrist (``estimation.pose_chec
 that jumps away and back), find the human's movement onset and end
 (``core.segmentation.segment_motion``) and resample both streams onto one uniform time base
 ``t = 0, dt, 2 dt, ...`` from onset to end. Training then sees what the observer passes on.
+With ``cut='recorded'`` the onset and end are instead the ones the bag records (its annotator's
+cut, io.bags): where a data set was cut by hand, the detector's ends, which only set a training
+demonstration's duration, wander by up to a second where a person slows down before the
+annotated end, and time-normalised paths of one interaction then disagree.
 
 - Wrist: linear interpolation between the two recorded samples around a resampled time, but only if
   they are at most ``2 * gap_tolerance`` periods apart (period = max(dt, wrist sample period)), so the
@@ -31,8 +35,8 @@ from mixture_ip_ros.core.frames import FrameTransform
 from mixture_ip_ros.core.segmentation import segment_motion
 from mixture_ip_ros.estimation.pose_check import accepted_online
 from mixture_ip_ros.robot.description import JOINT_NAMES
-from mixture_ip_ros.io.bags import (JOINT_TOPIC, WRIST_TOPIC, BagError,
-                                      RawRecording, read_bag)
+from mixture_ip_ros.io.bags import (END_KEY, JOINT_TOPIC, ONSET_KEY, WRIST_TOPIC, BagError,
+                                    RawRecording, read_bag)
 
 logger = logging.getLogger(__name__)
 
@@ -86,11 +90,26 @@ def resample_wrist(t_src: np.ndarray, xyz_src: np.ndarray, t_query: np.ndarray,
     return out
 
 
+def _recorded_cut(rec: RawRecording, source: str) -> tuple:
+    """The (onset, end) the bag records, seconds on the recording's time base."""
+    custom = rec.custom_data or {}
+    if ONSET_KEY not in custom or END_KEY not in custom:
+        raise BagError(source, f'no recorded movement interval ({ONSET_KEY}, {END_KEY} in its '
+                               "metadata custom_data); load it with cut='detected'")
+    try:
+        onset_ns, end_ns = int(custom[ONSET_KEY]), int(custom[END_KEY])
+    except (TypeError, ValueError):
+        raise BagError(source, f'the recorded movement interval is not two integer stamps: '
+                               f'{custom[ONSET_KEY]!r}, {custom[END_KEY]!r}') from None
+    return (onset_ns - rec.start_time_ns) * 1e-9, (end_ns - rec.start_time_ns) * 1e-9
+
+
 def segment_recording(rec: RawRecording, *, transform=None, segmentation: Optional[dict] = None,
-                      source: str = 'recording'):
+                      source: str = 'recording', cut: str = 'detected'):
     """The wrist stream in the robot base frame (N, 3), NaN where no sample is or the observer
     would drop it, and the movement's onset and end times (s, the recording's time base), found
-    as the observer finds them. Raises BagError."""
+    as the observer finds them (``cut='detected'``) or as the bag records them
+    (``'recorded'``). Raises BagError."""
     tf = FrameTransform.from_any(transform)
     xyz = tf.apply_array(rec.wrist_xyz)
     valid = ~np.isnan(xyz).any(axis=1)
@@ -98,10 +117,15 @@ def segment_recording(rec: RawRecording, *, transform=None, segmentation: Option
     xyz[~valid] = np.nan
     if valid.sum() < 2:
         raise BagError(source, 'fewer than 2 valid wrist samples')
-    try:
-        t_onset, t_end = segment_motion(rec.wrist_t, xyz, **(segmentation or {}))
-    except ValueError as exc:
-        raise BagError(source, f'no movement onset/end found in the wrist stream: {exc}') from exc
+    if cut == 'recorded':
+        t_onset, t_end = _recorded_cut(rec, source)
+    elif cut == 'detected':
+        try:
+            t_onset, t_end = segment_motion(rec.wrist_t, xyz, **(segmentation or {}))
+        except ValueError as exc:
+            raise BagError(source, f'no movement onset/end found in the wrist stream: {exc}') from exc
+    else:
+        raise ValueError(f"cut must be 'detected' or 'recorded', got {cut!r}")
     t_onset, t_end = float(t_onset), float(t_end)
     if not (np.isfinite(t_onset) and np.isfinite(t_end) and t_end > t_onset):
         raise BagError(source, f'segmentation gave onset {t_onset} s and end {t_end} s')
@@ -111,7 +135,8 @@ def segment_recording(rec: RawRecording, *, transform=None, segmentation: Option
 def recording_to_demonstration(rec: RawRecording, *, transform=None, dt: float = 0.01,
                                gap_tolerance: float = 1.25, max_joint_gap: float = 0.1,
                                segmentation: Optional[dict] = None, wrist_frame: Optional[str] = None,
-                               name: Optional[str] = None, source: str = 'recording') -> Demonstration:
+                               name: Optional[str] = None, source: str = 'recording',
+                               cut: str = 'detected') -> Demonstration:
     """Resample a :class:`RawRecording` onto the onset..end time base (see module docstring).
 
     ``source`` names the recording in errors (the bag path when called from load_demonstration).
@@ -123,7 +148,7 @@ def recording_to_demonstration(rec: RawRecording, *, transform=None, dt: float =
     if wrist_frame is not None and rec.wrist_frame != wrist_frame:
         raise BagError(source, f'wrist poses are in frame {rec.wrist_frame!r}, expected {wrist_frame!r}')
     xyz, t_onset, t_end = segment_recording(rec, transform=transform,
-                                            segmentation=segmentation, source=source)
+                                            segmentation=segmentation, source=source, cut=cut)
     valid = ~np.isnan(xyz).any(axis=1)
     n = int(np.floor((t_end - t_onset) / dt + 1e-9)) + 1
     if n < 2:
@@ -160,6 +185,7 @@ def recording_to_demonstration(rec: RawRecording, *, transform=None, dt: float =
 
 def load_demonstration(bag, *, transform=None, dt: float = 0.01, gap_tolerance: float = 1.25,
                        max_joint_gap: float = 0.1, segmentation: Optional[dict] = None,
+                       cut: str = 'detected',
                        wrist_topic: str = WRIST_TOPIC, joint_topic: str = JOINT_TOPIC,
                        joint_names: Sequence[str] = JOINT_NAMES,
                        wrist_frame: Optional[str] = None) -> Demonstration:
@@ -172,6 +198,7 @@ def load_demonstration(bag, *, transform=None, dt: float = 0.01, gap_tolerance: 
     rec = read_bag(bag, wrist_topic=wrist_topic, joint_topic=joint_topic, joint_names=joint_names)
     return recording_to_demonstration(rec, transform=transform, dt=dt, gap_tolerance=gap_tolerance,
                                       max_joint_gap=max_joint_gap, segmentation=segmentation,
+                                      cut=cut,
                                       wrist_frame=wrist_frame, name=bag.name, source=str(bag))
 
 

@@ -34,7 +34,7 @@ def write_scenario_bags(scenario: str, out_dir, seed: int = 0, occlusion: float 
 
     ``out_dir`` must not exist or be empty. Returns the bag paths. labels.json maps bag name to
     label and records the scenario, seed and robot; the label, scenario, seed and robot are also
-    in each bag's metadata custom_data. Wrist poses are in the frame 'world', joint states carry
+    in each bag's metadata custom_data, with the movement's true onset and end. Wrist poses are in the frame 'world', joint states carry
     the robot's joint names. ``robot`` is used when ``demos`` is None (else the demos' own).
     """
     from mixture_ip_ros.io.bags import write_demonstration_bag
@@ -54,7 +54,7 @@ def write_scenario_bags(scenario: str, out_dir, seed: int = 0, occlusion: float 
             out / d.name, d.wrist_t, d.wrist_xyz, d.joint_t, d.joint_q, joint_qd=d.joint_qd,
             storage=storage, label=d.label, joint_names=d.robot.joint_names,
             custom_data={'mixture_ip_ros.scenario': scenario, 'mixture_ip_ros.seed': str(seed),
-                         'mixture_ip_ros.robot': d.robot.name}))
+                         'mixture_ip_ros.robot': d.robot.name}, segment=(d.onset, d.end)))
     labels = {'scenario': scenario, 'seed': seed, 'occlusion': occlusion,
               'robot': robots.pop(), 'labels': {d.name: d.label for d in demos}}
     (out / LABEL_FILE).write_text(json.dumps(labels, indent=2, sort_keys=True) + '\n')
