@@ -1,7 +1,7 @@
 """The interactions demo for every shipped arm and three models: NuiSI v2's 11 held-out
 recordings replayed through the nodes (app.interactions.replay, as `mixture-ip demo --scenario
 interactions` does), with
-- 'chosen': K as training chooses it (leave-one-out, unsupervised: the demo's model);
+- 'chosen': K as training chooses it (unsupervised: the demo's model);
 - 'k4': K = 4 given (one per interaction), unsupervised;
 - 'supervised': one component per interaction, the labels read (a reference: what the loop
   does once discovery finds the interactions; the demo never reads labels).
