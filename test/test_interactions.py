@@ -169,3 +169,25 @@ def test_training_and_the_observer_find_the_same_time_zero(data, tmp_path):
     assert times['onset'] == pytest.approx(onset, abs=1e-6)
     assert times['end'] == pytest.approx(end, abs=1e-6)
     assert abs(onset - made.onset) < 0.3 and abs(end - made.end) < 1.0
+
+
+def test_training_cuts_the_recordings_where_their_authors_did(data, tmp_path):
+    """The scenario's bags record each recording's own interval and the demo trains on it;
+    bags written before they recorded it are refused with what to do."""
+    from mixture_ip_ros.app import interactions as app
+    from mixture_ip_ros.io.bags import END_KEY, ONSET_KEY
+    from mixture_ip_ros.io.dataset import load_demonstration
+    scene = interactions.scene('iiwa14', train=data['train'])
+    for split in ('train', 'test'):
+        r = next(x for x in data[split] if x.label == 'rocket_fistbump')
+        made = interactions.write_bags(scene, split, tmp_path / 'bags' / split, recordings=[r])[0]
+    demo = load_demonstration(tmp_path / 'bags' / 'test' / r.name, **app.loading(scene))
+    assert demo.duration == pytest.approx(made.end - made.onset, abs=1.5 / r.rate)
+    assert made.end - made.onset == pytest.approx(r.t[-1], abs=1e-9)
+    for path in (tmp_path / 'bags' / 'train').glob('*/metadata.yaml'):
+        meta = yaml.safe_load(path.read_text())
+        custom = meta['rosbag2_bagfile_information']['custom_data']
+        del custom[ONSET_KEY], custom[END_KEY]
+        path.write_text(yaml.safe_dump(meta))
+    with pytest.raises(ValueError, match='remove .* to write them again'):
+        app.prepare(tmp_path / 'bags', tmp_path / 'out', 'iiwa14')
