@@ -3,8 +3,9 @@ replayed from rosbag2 bags through the real nodes (bag_player -> observer -> est
 on simulated time, the iiwa in the partner's place.
 
 The model is the demo's: trained without labels on the retargeted training split, K chosen
-(it finds the four interactions; labels only name its components). The shortest held-out recording of each interaction is replayed at twice real time (the nodes
-run on simulated time, so only the wall-clock time changes): about 35 s of replay.
+(it finds the four interactions; labels only name its components). The shortest held-out
+recording of each interaction is replayed at twice real time (the nodes run on simulated time,
+so only the wall-clock time changes): about 35 s of replay.
 """
 
 import numpy as np

@@ -23,8 +23,9 @@ import numpy as np
 
 from mixture_ip_ros.app.training import text_progress, train_to_file
 from mixture_ip_ros.core.online import OnlineEstimator
-from mixture_ip_ros.io.bags import ONSET_KEY, BagError, read_bag
-from mixture_ip_ros.io.dataset import load_dataset, load_demonstration, segment_recording
+from mixture_ip_ros.io.bags import read_bag
+from mixture_ip_ros.io.dataset import (NoRecordedInterval, load_dataset, load_demonstration,
+                                       segment_recording)
 from mixture_ip_ros.io.files import write_text_atomic
 from mixture_ip_ros.robot.description import DEFAULT_ROBOT, load_description
 from mixture_ip_ros.scenarios import interactions, nuisi
@@ -75,9 +76,7 @@ def prepare(data_dir: Path, out_dir: Path, robot=None, n_components=None,
                              f'{robot.name!r}; give another --data folder')
     try:
         demos, _ = load_dataset(data_dir / 'train', on_error='raise', **loading(scene))
-    except BagError as exc:
-        if ONSET_KEY not in exc.problem:
-            raise
+    except NoRecordedInterval as exc:
         raise ValueError(f'{exc}: these bags were written before bags recorded their '
                          f'interval; remove {data_dir} to write them again') from None
     model_path = out_dir / 'model.npz'

@@ -197,7 +197,8 @@ def write_demonstration_bag(path, wrist_t, wrist_xyz, joint_t, joint_q, *,
     if segment is not None:
         onset, end = (float(x) for x in segment)
         if not (np.isfinite(onset) and np.isfinite(end) and onset < end):
-            raise ValueError(f'segment must be a finite (onset, end) with onset < end, got {segment!r}')
+            raise ValueError(f'segment must be a finite (onset, end) with onset < end, '
+                             f'got {segment!r}')
         onset_ns, end_ns = _stamp_ns(start_time_ns, [onset, end])
         custom_data.update({ONSET_KEY: str(int(onset_ns)), END_KEY: str(int(end_ns))})
 

@@ -90,11 +90,15 @@ def resample_wrist(t_src: np.ndarray, xyz_src: np.ndarray, t_query: np.ndarray,
     return out
 
 
+class NoRecordedInterval(BagError):
+    """A bag cut where it records its movement interval (``cut='recorded'``) records none."""
+
+
 def _recorded_cut(rec: RawRecording, source: str) -> tuple:
     """The (onset, end) the bag records, seconds on the recording's time base."""
     custom = rec.custom_data or {}
     if ONSET_KEY not in custom or END_KEY not in custom:
-        raise BagError(source, f'no recorded movement interval ({ONSET_KEY}, {END_KEY} in its '
+        raise NoRecordedInterval(source, f'no recorded movement interval ({ONSET_KEY}, {END_KEY} in its '
                                "metadata custom_data); load it with cut='detected'")
     try:
         onset_ns, end_ns = int(custom[ONSET_KEY]), int(custom[END_KEY])
@@ -123,7 +127,8 @@ def segment_recording(rec: RawRecording, *, transform=None, segmentation: Option
         try:
             t_onset, t_end = segment_motion(rec.wrist_t, xyz, **(segmentation or {}))
         except ValueError as exc:
-            raise BagError(source, f'no movement onset/end found in the wrist stream: {exc}') from exc
+            raise BagError(source, f'no movement onset/end found in the wrist stream: '
+                                   f'{exc}') from exc
     else:
         raise ValueError(f"cut must be 'detected' or 'recorded', got {cut!r}")
     t_onset, t_end = float(t_onset), float(t_end)

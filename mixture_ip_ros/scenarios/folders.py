@@ -34,8 +34,8 @@ def write_scenario_bags(scenario: str, out_dir, seed: int = 0, occlusion: float 
 
     ``out_dir`` must not exist or be empty. Returns the bag paths. labels.json maps bag name to
     label and records the scenario, seed and robot; the label, scenario, seed and robot are also
-    in each bag's metadata custom_data, with the movement's true onset and end. Wrist poses are in the frame 'world', joint states carry
-    the robot's joint names. ``robot`` is used when ``demos`` is None (else the demos' own).
+    in each bag's metadata custom_data, with the movement's true onset and end. Wrist poses are
+    in the frame 'world', joint states carry the robot's joint names. ``robot`` is used when ``demos`` is None (else the demos' own).
     """
     from mixture_ip_ros.io.bags import write_demonstration_bag
     out = Path(out_dir)
