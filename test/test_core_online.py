@@ -7,8 +7,10 @@ from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.core.interaction import condition_on_observed, trajectory_distribution
 from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.online import OnlineEstimator
-from mixture_ip_ros.core.phase import (alpha_m_step, alpha_prior_std, log_evidence_batch, timing_variance,
-                                       phase_posterior_batch)
+from mixture_ip_ros.core.phase import (alpha_log_prior, alpha_m_step, alpha_prior_std,
+                                       log_density_on_grid, log_evidence_batch,
+                                       phase_posterior_batch, tempered_speed_posterior,
+                                       timing_variance)
 
 from scipy.special import logsumexp
 from scipy.stats import multivariate_normal, norm
@@ -498,3 +500,45 @@ def test_end_posterior_is_the_batch_posterior_with_the_phase_known(model_and_dem
     est.reset()
     with pytest.raises(ValueError, match='no observation absorbed'):
         est.end_posterior(T)
+
+
+def test_tempered_speed_posterior_spans_eq16_to_the_prior(model_and_demos):
+    """Weight 1: each component's row of the exact joint posterior (eq. 16), normalised;
+    weight 0: p(alpha | k); the component posterior (eq. 11) does not depend on the weight, and
+    the MAP speed is the tempered posterior's."""
+    import copy
+    model, demos, _ = model_and_demos
+    estimators = {}
+    for w in (1.0, 0.3, 0.0):
+        m = copy.copy(model)
+        m.speed_weight = w
+        est = estimators[w] = OnlineEstimator(m, n_alpha=30)
+        _feed(est, demos[4], 0.4, 3)
+    exact, K = estimators[1.0], model.n_components
+    joint = exact.joint_posterior()
+    prior = np.exp(alpha_log_prior(exact.alphas, model.alpha_mean_, model.alpha_std_))
+    for k in range(K):
+        if joint[k].sum() > 1e-100:             # a component the evidence left is all zeros
+            assert np.allclose(exact.speed_posterior(k), joint[k] / joint[k].sum(), atol=1e-9)
+        assert np.allclose(estimators[0.0].speed_posterior(k), prior[k], atol=1e-12)
+        lp = 0.3 * exact.log_evidence[k] + np.log(prior[k])
+        assert np.allclose(estimators[0.3].speed_posterior(k), np.exp(lp - logsumexp(lp)),
+                           atol=1e-12)
+    for est in estimators.values():
+        assert np.allclose(est.component_posterior(), exact.component_posterior(), atol=1e-12)
+        k, a = est.map_hypothesis()
+        assert a == est.alphas[np.argmax(est.speed_posterior(k))]
+        assert np.isclose(est.alpha_posterior().sum(), 1.0)
+    assert np.allclose(exact.alpha_posterior(), joint.sum(axis=0), atol=1e-12)
+    # a pruned hypothesis stays out of it
+    assert tempered_speed_posterior(np.array([-np.inf, 0.0, -1.0]), np.zeros(3), 0.0)[0] == -np.inf
+
+
+def test_log_density_on_grid_is_the_density_of_a_fine_grid_posterior():
+    grid = np.linspace(0.2, 1.8, 400)
+    lp = norm.logpdf(grid, 1.0, 0.1)
+    lp -= logsumexp(lp)
+    for a in (0.85, 1.0, 1.23):
+        assert log_density_on_grid(lp, grid, a) == pytest.approx(norm.logpdf(a, 1.0, 0.1),
+                                                                 abs=1e-3)
+    assert log_density_on_grid(lp, grid, 2.5) == pytest.approx(np.log(1e-12))

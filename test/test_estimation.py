@@ -2,10 +2,13 @@
 prediction, the commit rule, the replan schedule on an injected clock, held samples, interaction
 records and rejection of bad input."""
 
+import copy
+
 import numpy as np
 import pytest
 
 from mixture_ip_ros.core.online import OnlineEstimator
+from mixture_ip_ros.core.phase import alpha_log_prior, log_evidence_batch
 from mixture_ip_ros.io.model_file import load_model
 from mixture_ip_ros.estimation.held import HeldSamples
 from mixture_ip_ros.estimation.planner import OnlinePlanner, PlannerSettings, should_commit
@@ -58,14 +61,14 @@ def _t(t):
     return _ns(t) * 1e-9
 
 
-def test_plan_follows_the_map_prediction_from_now_to_the_end(trained):
+def test_plan_at_a_given_speed_follows_its_prediction_from_now_to_the_end(trained):
     model, _, held = trained
     demo = held[1]
     est = OnlineEstimator(model)
     _feed(est, demo, until=0.4 * demo.duration)
     t_now = float(demo.t[demo.t <= 0.4 * demo.duration][-1])
-    plan = build_plan(est, t_now, n_points=25, lookahead=0.1)
     k, alpha = est.map_hypothesis()
+    plan = build_plan(est, t_now, n_points=25, lookahead=0.1, alpha=alpha)
     assert (plan.component, plan.alpha, plan.final) == (k, alpha, False)
     assert plan.positions.shape == plan.velocities.shape == plan.accelerations.shape == (25, 7)
     assert plan.times.shape == plan.phases.shape == (25,)
@@ -89,32 +92,95 @@ def test_plan_follows_the_map_prediction_from_now_to_the_end(trained):
     assert ref_wrist.shape == (25, 3)
 
 
+def _tempered(model, weight):
+    m = copy.copy(model)
+    m.speed_weight = weight
+    return m
+
+
+def _expected_path_oracle(model, demo, until, k, times):
+    """The expected controlled path under component k, the speed marginalised, from the batch
+    formulas: eq. 18 per grid speed (core.phase.log_evidence_batch), tempered by the model's
+    speed weight, times p(alpha | k), normalised; each speed's conditioned mean (eq. 13, the
+    estimator's own predict at that grid speed) weighted by it."""
+    ref = OnlineEstimator(model)
+    _feed(ref, demo, until=until)
+    t, y = np.array(ref._times), np.array(ref._values)
+    do = model.n_observed_ * model.n_basis
+    noise = model.observed_noise_var_at(ref.min_interval)
+    lp = np.array([model.speed_weight * log_evidence_batch(
+        model.means_[k][:do], model.covariances_[k][:do, :do], model.basis_, t, y, a, noise)
+        for a in ref.alphas]) + alpha_log_prior(ref.alphas, model.alpha_mean_,
+                                                model.alpha_std_)[k]
+    p = np.exp(lp - lp.max())
+    keep = p >= 1e-3 * p.max()
+    p = np.where(keep, p, 0.0) / p[keep].sum()
+    path = sum(p[m] * ref.predict(ref.alphas[m] * times, component=k, alpha=ref.alphas[m],
+                                  covariance=False)['controlled']['position']
+               for m in np.flatnonzero(keep))
+    return path, 1.0 / ref.alphas[keep].min()
+
+
+@pytest.mark.parametrize('weight', [1.0, 0.2])
+def test_plan_marginalises_the_phase_speed_from_now_to_the_slowest_end(trained, weight):
+    model, _, held = trained
+    model = _tempered(model, weight)
+    demo = held[1]
+    est = OnlineEstimator(model)
+    until = 0.4 * demo.duration
+    _feed(est, demo, until=until)
+    t_now = float(demo.t[demo.t <= until][-1])
+    k = est.map_hypothesis()[0]
+    plan = build_plan(est, t_now, n_points=25, lookahead=0.1)
+    assert plan.component == k and not plan.final and check_plan(plan) is None
+    assert len(est.speed_hypotheses()[0]) > 1                # more than one speed holds it
+    oracle, t_end = _expected_path_oracle(model, demo, until, k, plan.times)
+    assert plan.times[0] == pytest.approx(t_now + 0.1, abs=1e-12)
+    assert plan.times[-1] == pytest.approx(t_end, rel=1e-12)
+    assert np.allclose(plan.positions, oracle, atol=1e-10)
+    assert not plan.velocities[-1].any() and not plan.accelerations[-1].any()
+    # the phases shown are the MAP speed's
+    assert plan.alpha == est.alphas[np.argmax(est.speed_posterior(k))]
+    assert np.allclose(plan.phases, np.minimum(plan.alpha * plan.times, 1.0))
+
+
 def test_plan_velocities_are_time_derivatives_of_positions(trained):
     model, _, held = trained
-    est = OnlineEstimator(model)
+    est = OnlineEstimator(_tempered(model, 0.2))
     _feed(est, held[0], until=0.3)
-    plan = build_plan(est, 0.3, n_points=2001, lookahead=0.0)
-    dt = np.diff(plan.times)
-    fd_vel = np.diff(plan.positions, axis=0) / dt[:, None]          # midpoints
-    mid_vel = 0.5 * (plan.velocities[1:] + plan.velocities[:-1])
-    scale = np.abs(plan.velocities).max()
-    assert np.abs(fd_vel[:-1] - mid_vel[:-1]).max() < 1e-4 * scale
-    fd_acc = np.diff(plan.velocities[:-1], axis=0) / dt[:-1, None]
-    mid_acc = 0.5 * (plan.accelerations[1:-1] + plan.accelerations[:-2])
-    assert np.abs(fd_acc[:-1] - mid_acc[:-1]).max() < 1e-3 * np.abs(plan.accelerations).max()
+    for alpha in (est.map_hypothesis()[1], None):
+        plan = build_plan(est, 0.3, n_points=2001, lookahead=0.0, alpha=alpha)
+        dt = np.diff(plan.times)
+        # each speed hypothesis stops at its own end (alpha_m t = 1): its velocity steps there
+        ends = 1.0 / est.alphas[est.speed_hypotheses()[0]]
+        smooth = ~np.any((plan.times[:-1, None] < ends) & (ends <= plan.times[1:, None]),
+                         axis=1)
+        smooth[-1] = False                              # the last point is set to rest
+        fd_vel = np.diff(plan.positions, axis=0) / dt[:, None]          # midpoints
+        mid_vel = 0.5 * (plan.velocities[1:] + plan.velocities[:-1])
+        scale = np.abs(plan.velocities).max()
+        assert np.abs(fd_vel - mid_vel)[smooth].max() < 1e-4 * scale
+        fd_acc = np.diff(plan.velocities, axis=0) / dt[:, None]
+        mid_acc = 0.5 * (plan.accelerations[1:] + plan.accelerations[:-1])
+        both = smooth[:-1] & smooth[1:]
+        assert (np.abs(fd_acc - mid_acc)[:-1][both].max()
+                < 1e-3 * np.abs(plan.accelerations).max())
 
 
 def test_human_at_rest_gives_a_single_point_at_the_final_posture(trained):
     model, _, held = trained
     demo = held[2]
-    est = OnlineEstimator(model)
+    est = OnlineEstimator(_tempered(model, 0.2))
     _feed(est, demo)
-    k, alpha = est.map_hypothesis()
-    t_now = float(demo.t[-1]) + 0.2                     # past 1 / alpha*
-    assert alpha * t_now > 1
+    k = est.map_hypothesis()[0]
+    speeds, p = est.speed_hypotheses()
+    assert len(speeds) > 1
+    t_now = 1.0 / est.alphas[speeds].min() + 0.2         # past every speed's end
     plan = build_plan(est, t_now, lookahead=0.1, settle_time=0.5)
     assert plan.final and plan.times.tolist() == [t_now + 0.5] and plan.phases.tolist() == [1.0]
-    assert np.allclose(plan.positions[0], est.predict([1.0])['controlled']['position'][0])
+    finals = [est.predict([1.0], component=k, alpha=est.alphas[m])['controlled']['position'][0]
+              for m in speeds]
+    assert np.allclose(plan.positions[0], p @ np.array(finals), atol=1e-12)
     assert not plan.velocities.any() and not plan.accelerations.any()
     assert check_plan(plan) is None
     # the final posture matches the held-out demonstration's (an independent check)
@@ -301,8 +367,8 @@ def test_bad_input_is_counted_and_estimation_goes_on(trained):
     assert planner.current.n_rejected == 5
     step = planner.replan()
     assert step.send
-    assert np.allclose(step.plan.positions, oracle.predict(step.plan.phases)['controlled']
-                       ['position'], atol=1e-12)
+    assert np.allclose(step.plan.positions, oracle.expected_controlled(step.plan.times)[1],
+                       atol=1e-12)
     planner.end(onset + _ns(demo.t[-1]))
     # after the end: held for a possible next onset, never fed to the finished interaction
     n = planner.current.n_observations
@@ -360,8 +426,8 @@ def test_backlog_absorbed_after_live_observations_gives_the_time_ordered_posteri
     np.testing.assert_allclose(planner.estimator.sigma, oracle.sigma, rtol=1e-8, atol=1e-12)
     step = planner.replan()
     assert step.send and step.committed_now
-    assert np.allclose(step.plan.positions, oracle.predict(step.plan.phases)['controlled']
-                       ['position'], atol=1e-10)
+    assert np.allclose(step.plan.positions, oracle.expected_controlled(step.plan.times)[1],
+                       atol=1e-10)
 
 
 def test_end_absorbs_what_is_left_of_the_backlog(trained):

@@ -1,5 +1,6 @@
 """Model files: round trip without pickle, and refusal of corrupt or mismatched files."""
 
+import copy
 import json
 import zipfile
 
@@ -63,6 +64,27 @@ def test_corrupt_files_are_refused(tmp_path, fitted, change, message):
     change(path)
     with pytest.raises(ModelFileError, match=message):
         load_model(path)
+
+
+def test_the_speed_weight_round_trips_and_a_bad_one_is_refused(tmp_path, fitted):
+    model, _ = fitted
+    model = copy.copy(model)
+    model.speed_weight = 0.2
+    path = save_model(tmp_path / 'm.npz', model, observed_names=OBS, controlled_names=CTRL)
+    assert load_model(path)[0].speed_weight == 0.2
+    for bad in (1.5, -0.1, 'half'):
+        model.speed_weight = bad
+        with pytest.raises(ValueError, match='speed_weight'):       # not written
+            save_model(tmp_path / 'bad.npz', model, observed_names=OBS, controlled_names=CTRL)
+        meta = json.loads(str(_arrays(path)['metadata']))
+        meta['params']['speed_weight'] = bad
+        _rewrite(path, metadata=np.array(json.dumps(meta)))
+        with pytest.raises(ModelFileError, match='invalid parameters.*speed_weight'):
+            load_model(path)
+    # a file written before the weight existed: eq. 16 as it was
+    del meta['params']['speed_weight']
+    _rewrite(path, metadata=np.array(json.dumps(meta)))
+    assert load_model(path)[0].speed_weight == 1.0
 
 
 def test_version_and_name_mismatch_are_refused(tmp_path, fitted):

@@ -5,10 +5,11 @@ import io
 
 import numpy as np
 
+from mixture_ip_ros.core.basis import GaussianBasis
 from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.app.training import text_progress, train
 
-from mixture_ip_ros.scenarios.synthetic import mixture_demos
+from mixture_ip_ros.scenarios.synthetic import mixture_demos, random_spd
 
 
 def test_em_training_chooses_k_on_regression_fits_and_fits_the_model_by_em():
@@ -89,3 +90,43 @@ def test_progress_is_a_bar_in_place_on_a_terminal_and_a_few_lines_otherwise():
     assert '\r' not in log.getvalue()
     assert lines == ['choosing K: 143/570 fits (25 %)', 'choosing K: 285/570 fits (50 %)',
                      'choosing K: 428/570 fits (75 %)', 'choosing K: 570/570 fits (100 %)']
+
+
+def _timed_demos(seed, drifting, n=30):
+    """Thesis 4.3.1's movements (durations 1.2-2.4 s). ``drifting``: the first 40 % of every
+    movement takes the same 0.6 s and the rest however long the movement lasts, so its
+    beginning tells nothing of its speed; else one constant speed, z = t / T."""
+    rng = np.random.default_rng(seed)
+    b = GaussianBasis(10)
+    zc = b.centers
+    mean = np.concatenate([np.sin(2.5 * zc), 0.6 * np.cos(3 * zc) - 0.3, zc ** 2])
+    cov = random_spd(rng, 3 * 10, 0.002, rank=4)
+    out = []
+    for _ in range(n):
+        w = rng.multivariate_normal(mean, cov).reshape(3, 10)
+        T = rng.uniform(1.2, 2.4)
+        t = np.arange(0.0, T + 1e-9, 0.01)
+        z = (np.where(t < 0.6, 0.4 * t / 0.6, 0.4 + 0.6 * (t - 0.6) / (T - 0.6)) if drifting
+             else t / T)
+        Y = b(np.minimum(z, 1.0)) @ w.T + 0.002 * rng.standard_normal((len(t), 3))
+        out.append(Demonstration(t, Y[:, :2], Y[:, 2:]))
+    return out
+
+
+def test_the_speed_weight_is_one_for_constant_speeds_and_less_where_the_speed_drifts():
+    """Training calibrates how much the online phase posterior trusts a prefix about the
+    speed on held-out folds: where every movement keeps one speed (the model's assumption) the
+    prefix tells it and eq. 16 (weight 1) scores best; where the beginning takes the same time
+    whatever the duration, the tempered posterior predicts held-out speeds better."""
+    constant = train(_timed_demos(0, False), n_components=1, n_basis=10,
+                     observation_noise=0.005)
+    drifting = train(_timed_demos(0, True), n_components=1, n_basis=10,
+                     observation_noise=0.005)
+    assert constant[0].speed_weight == constant[1]['speed_weight'] == 1.0
+    scores = drifting[1]['speed_scores']
+    w = drifting[0].speed_weight
+    assert w < 1.0 and scores[f'{w:g}'] == max(scores.values()) > scores['1'] + 0.1
+    assert constant[1]['speed_scores']['1'] > scores['1'] + 1.0
+    # given, it is kept
+    assert train(_timed_demos(0, True), n_components=1, n_basis=10,
+                 speed_weight=0.3)[0].speed_weight == 0.3

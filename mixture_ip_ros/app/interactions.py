@@ -151,7 +151,7 @@ def loop_errors(record, scene, recording) -> dict:
 def offline_errors(model, scene, recording, bag, fraction: float) -> dict:
     """The same model offline: OnlineEstimator (the nodes' settings: 50 alphas, 20 Hz) fed the
     replayed movement up to ``fraction`` of it, phase unknown; the controlled agent it predicts
-    for the rest (MAP component and phase speed, as the nodes plan) as flange positions (FK)
+    for the rest (MAP component, phase speed marginalised, as the nodes plan) as flange positions (FK)
     against where the partner's hand was: RMS over the rest of the movement, and at its end
     (z = 1) against the partner's last position (cm). The movement is the one the observer
     finds (the bag segmented as training segments it)."""
@@ -165,9 +165,8 @@ def offline_errors(model, scene, recording, bag, fraction: float) -> dict:
     for i in rows[demo.t[rows] <= fraction * demo.duration + 1e-9]:
         est.update(float(demo.t[i]), demo.observed[i])
     rest = demo.t >= fraction * demo.duration
-    _, alpha = est.map_hypothesis()
-    z = np.clip(alpha * np.r_[demo.t[rest], np.inf], 0.0, 1.0)
-    q = est.predict(z, covariance=False)['controlled']['position']
+    # the expected path as the nodes plan it; at t = inf every speed hypothesis has ended
+    q = est.expected_controlled(np.r_[demo.t[rest], np.inf])[1]
     flange = scene.kin.fk_positions(q)
     pt, partner = interactions.partner_hand(recording, scene)
     d = np.linalg.norm(flange[:-1] - _partner_at(t_onset + demo.t[rest], pt, partner), axis=1)

@@ -32,7 +32,8 @@ import numpy as np
 
 from mixture_ip_ros.core.demonstration import Layout
 from mixture_ip_ros.core.mixture import MixtureIProMP
-from mixture_ip_ros.core.selection import (PRIOR_SCALES, calibrated_heldout_curves,
+from mixture_ip_ros.core.online import SPEED_WEIGHTS, speed_log_scores
+from mixture_ip_ros.core.selection import (PRIOR_SCALES, calibrated_heldout_curves, cv_folds,
                                            loo_rms_by_components, not_significantly_worse,
                                            prepare_for_cv, selection_curve)
 from mixture_ip_ros.core.patterns import PatternSpace, heldout_curve, partition_stability
@@ -137,9 +138,15 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
                 demos, n_components, n_folds, progress, prior_scales, curve_params)}
         if 'selection' in info:
             info['selection']['prior_scale'] = params.get('prior_scale')
+    if 'speed_weight' not in params:
+        weight, scores = _calibrated_speed_weight(demos, n_components, labels, n_folds,
+                                                  {**params, 'method': 'regression'})
+        params = {**params, 'speed_weight': weight}
+        info['speed_scores'] = scores
     model = MixtureIProMP(n_components=n_components, **params).fit(demos, labels=labels)
     info['n_components'] = int(n_components)
     info['prior_scale'] = float(model.prior_scale)
+    info['speed_weight'] = float(model.speed_weight)
     info['noise_var'] = np.asarray(model.noise_var_).tolist()
     return model, info
 
@@ -222,6 +229,33 @@ def _calibrated_floor(demos, K, n_folds, progress, prior_scales, params) -> floa
                                        _offset_progress(progress, 0, None), **params)
     which = 'controlled_rms' if 'controlled_rms' in curves else 'loglik'
     return float(curves[which]['prior_scale'][0])
+
+
+def _calibrated_speed_weight(demos, n_components, labels, n_folds, params):
+    """The speed weight (core.online.SPEED_WEIGHTS) whose tempered phase posterior predicts
+    held-out demonstrations' speeds best from their beginnings (core.online.speed_log_scores,
+    summed over ``n_folds`` folds; ties: the larger weight, nearer eq. 16), and the mean score
+    of each weight; (1, None) where no fold can hold the model. The fits are regression fits,
+    as the floor's are."""
+    if len(demos) < 2:
+        return 1.0, None
+    fold = cv_folds(len(demos), n_folds, 0)
+    total, n = np.zeros(len(SPEED_WEIGHTS)), 0
+    for f in range(fold.max() + 1):
+        train_i, test_i = np.flatnonzero(fold != f), np.flatnonzero(fold == f)
+        fit_labels = None if labels is None else [labels[i] for i in train_i]
+        if len(train_i) < n_components or (fit_labels is not None
+                                           and len(set(fit_labels)) != n_components):
+            continue
+        model = MixtureIProMP(n_components=n_components, **params).fit(
+            [demos[i] for i in train_i], labels=fit_labels)
+        score, m = speed_log_scores(model, [demos[i] for i in test_i])
+        total += score
+        n += m
+    if n == 0:
+        return 1.0, None
+    best = max(range(len(SPEED_WEIGHTS)), key=lambda i: (total[i], SPEED_WEIGHTS[i]))
+    return SPEED_WEIGHTS[best], {f'{w:g}': float(t / n) for w, t in zip(SPEED_WEIGHTS, total)}
 
 
 def _offset_progress(progress, offset, total):

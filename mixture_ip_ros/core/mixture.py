@@ -88,12 +88,21 @@ class MixtureIProMP:
     ``noise_var`` share the noise model. ``observation_noise`` (per observed DOF or a scalar, in
     the DOF's unit) is extra sensor noise of the online stream, added to the learned variance
     when conditioning on new observations (none by default).
+
+    ``speed_weight`` (eta in [0, 1]) is how much the online phase-speed posterior trusts the
+    observations: p(alpha | D, k) proportional to p(D | k, alpha)^eta p(alpha | k) (eta = 1:
+    eqs. 16-18; core.phase.tempered_speed_posterior). The model says a movement keeps one
+    speed from onset to end; people speed up and slow down within one (a handshake's shaking
+    lasts as long as it lasts), so the speed that explains a prefix says less about the rest
+    than eq. 16 claims. Fitting does not use it; training calibrates it on held-out
+    demonstrations (core.online.speed_log_scores).
     """
 
     def __init__(self, n_components: int = 3, n_basis: int = 15, method: str = 'regression',
                  ridge: float = 1e-6, prior_strength: float = 10.0, prior_scale: float = 0.02,
                  max_iter: int = 200, tol: float = 1e-7, n_init: int = 10, random_state=0,
-                 observation_noise=0.0, noise: str = 'tied', noise_var=None):
+                 observation_noise=0.0, noise: str = 'tied', noise_var=None,
+                 speed_weight: float = 1.0):
         self.n_components = n_components
         self.n_basis = n_basis
         self.method = method
@@ -107,6 +116,7 @@ class MixtureIProMP:
         self.observation_noise = observation_noise
         self.noise = noise
         self.noise_var = noise_var
+        self.speed_weight = speed_weight
 
     # ------------------------------------------------------------------ learning
     def fit(self, demonstrations, labels=None, init=None):
@@ -326,6 +336,10 @@ class MixtureIProMP:
         if on.ndim > 1 or not np.all(np.isfinite(on) & (on >= 0)):
             raise ValueError('observation_noise must be a number or one number per observed DOF, '
                              f'each >= 0 (in the DOF\'s unit), got {self.observation_noise!r}')
+        w = self.speed_weight
+        if (isinstance(w, bool) or not isinstance(w, (int, float, np.integer, np.floating))
+                or not 0.0 <= w <= 1.0):
+            raise ValueError(f'speed_weight must be in [0, 1], got {self.speed_weight!r}')
 
     # ------------------------------------------------------------------ inference
     @property

@@ -17,8 +17,14 @@ from ._fast import (W, basis_rows, compact_lanes, from_lanes, kalman_update, mea
                     to_lanes, tri_index)
 from .interaction import trajectory_distribution
 from .numerics import logsumexp
-from .phase import alpha_grid, alpha_log_prior
+from .phase import (alpha_grid, alpha_log_prior, log_density_on_grid, tempered_speed_posterior,
+                    tempered_speed_weights)
 from .promp import observation_stats, weight_posterior
+
+
+# Phase speeds less probable than this times the most probable one are left out of the
+# expected path (OnlineEstimator.speed_hypotheses).
+SPEED_SUPPORT = 1e-3
 
 
 def spaced(t: float, t_last: float, min_interval: float) -> bool:
@@ -49,6 +55,12 @@ class OnlineEstimator:
     prune, so samples absorbed in any order and then pruned give one result. It must be below
     1 / (K M), so that the most probable hypothesis is kept.
 
+    Phase speed: the component posterior p(k | D) is eq. 11 with the phase marginalised, exact;
+    the phase speed of a component is read from its tempered posterior
+    p(alpha | D, k) ~ p(D | k, alpha)^eta p(alpha | k), eta the model's ``speed_weight``
+    (core.phase.tempered_speed_posterior; 1 gives eq. 16): the MAP alpha, the phase and the
+    plans follow it. Pruning reads the exact joint posterior.
+
     Between and beyond the grid: the samples absorbed are kept (time and position, in the order
     absorbed), so that a hypothesis the grid does not hold can be evaluated exactly when asked
     (:meth:`posterior_at`): the MAP alpha between grid values (:meth:`refined_alpha`) and the
@@ -72,6 +84,7 @@ class OnlineEstimator:
             raise ValueError(f'prune_below must be in [0, 1/(K M) = {1.0 / (K * M):.3g}), '
                              f'got {prune_below}')
         self.prune_below = float(prune_below)
+        self.speed_weight = float(model.speed_weight)
         # Column c of the state is hypothesis (k, m) = divmod(c, M) until pruning reorders them;
         # the columns are padded to whole lane groups with copies of column 0 (never read).
         self._tri = tri_index(do)
@@ -269,9 +282,29 @@ class OnlineEstimator:
         """p(k | D) (eq. 11 with the phase marginalised)."""
         return self.joint_posterior().sum(axis=1)
 
+    def speed_posterior(self, component=None):
+        """p_eta(alpha_m | D, k) of ``component`` k (k* if None) over the grid: the tempered
+        posterior the phase speed is read from (see the class docstring), (M,)."""
+        k = self._map_indices()[0] if component is None else int(component)
+        return np.exp(self._speed_log_posterior(k))
+
+    def _speed_log_posterior(self, k):
+        M = len(self.alphas)
+        return tempered_speed_posterior(self.log_evidence_flat[k * M:(k + 1) * M],
+                                        self._log_prior[k * M:(k + 1) * M], self.speed_weight)
+
+    def _speed_log_weights(self, k):
+        """:meth:`_speed_log_posterior` before normalising (what an argmax or a ratio needs)."""
+        M = len(self.alphas)
+        return tempered_speed_weights(self.log_evidence_flat[k * M:(k + 1) * M],
+                                      self._log_prior[k * M:(k + 1) * M], self.speed_weight)
+
     def alpha_posterior(self):
-        """p(alpha_m | D) (eq. 16 with the component marginalised)."""
-        return self.joint_posterior().sum(axis=0)
+        """p(alpha_m | D) = sum_k p(k | D) p_eta(alpha_m | D, k) (eq. 16 with the component
+        marginalised, for eta = 1)."""
+        pk = self.component_posterior()
+        return sum(pk[k] * self.speed_posterior(k) for k in range(self.n_components)
+                   if pk[k] > 0.0)
 
     def map_hypothesis(self):
         """(k*, alpha*): the most probable component (eq. 12) and, for it, the MAP alpha (eq. 20)."""
@@ -279,26 +312,28 @@ class OnlineEstimator:
         return k, float(self.alphas[m])
 
     def _map_indices(self):
-        joint = self.joint_posterior()
-        k = int(np.argmax(joint.sum(axis=1)))
-        return k, int(np.argmax(joint[k]))
+        k = int(np.argmax(self.component_posterior()))
+        return k, self._map_alpha_index(k)
+
+    def _map_alpha_index(self, k):
+        return int(np.argmax(self._speed_log_weights(k)))
 
     def _hypothesis(self, component, alpha):
         """Indices (k, m) of ``component`` (k* if None) and of the grid alpha nearest ``alpha``
         (that component's MAP alpha if None)."""
         k = self._map_indices()[0] if component is None else int(component)
         if alpha is None:
-            return k, int(np.argmax(self.joint_posterior()[k]))
+            return k, self._map_alpha_index(k)
         return k, int(np.argmin(np.abs(self.alphas - alpha)))
 
     def controlled_mean(self, k, mu_o):
         """Mean of the controlled agent's weights (Q*N,) under component ``k`` given a mean
-        ``mu_o`` (P*N,) of the observed agent's (eq. 13's conditional mean, through the
-        regression B_k of controlled on observed weights), for instance that of
+        ``mu_o`` (P*N,) of the observed agent's, or one per row (eq. 13's conditional mean,
+        through the regression B_k of controlled on observed weights), for instance that of
         :meth:`posterior_at` at any alpha."""
         prior_mean = self.model.means_[k]
-        do = mu_o.shape[0]
-        return prior_mean[do:] + self._gain[k] @ (mu_o - prior_mean[:do])
+        do = mu_o.shape[-1]
+        return prior_mean[do:] + (mu_o - prior_mean[:do]) @ self._gain[k].T
 
     def phase(self, t=None):
         """Phase z = alpha* t under the MAP hypothesis, clamped to [0, 1], at ``t`` (s since
@@ -338,14 +373,12 @@ class OnlineEstimator:
         After part of a movement the posterior over alpha can be narrower than the grid step;
         the grid then limits the phase, and a finer grid costs every update, this nothing."""
         k = self._map_indices()[0] if component is None else int(component)
-        m = int(np.argmax(self.joint_posterior()[k]))
+        m = self._map_alpha_index(k)
         a = self.alphas
         if not self._times or m == 0 or m == len(a) - 1:
             return float(a[m])
-        M = len(a)
-        # log p(alpha_m | D, k) up to a constant, from the evidence (no underflow far out)
-        lp = (self._log_prior[k * M + m - 1:k * M + m + 2]
-              + self.log_evidence_flat[k * M + m - 1:k * M + m + 2])
+        # log p_eta(alpha_m | D, k) up to a constant, from the evidence (no underflow far out)
+        lp = self._speed_log_weights(k)[m - 1:m + 2]
         if not np.all(np.isfinite(lp)):
             return float(a[m])
         curvature = lp[0] - 2.0 * lp[1] + lp[2]
@@ -433,6 +466,40 @@ class OnlineEstimator:
             observed = np.zeros((0, self.n_observed))
         return k, a, controlled, observed
 
+    def speed_hypotheses(self, component=None):
+        """The phase speeds that hold component k's (k* if None) tempered posterior: (grid
+        indices, probabilities renormalised over them). A speed less probable than
+        SPEED_SUPPORT times the most probable one is left out (its share of a prediction is
+        below that, and each one costs a trajectory)."""
+        k = self._map_indices()[0] if component is None else int(component)
+        lw = self._speed_log_weights(k)
+        p = np.exp(lw - lw.max())
+        keep = np.flatnonzero(p >= SPEED_SUPPORT)
+        return keep, p[keep] / p[keep].sum()
+
+    def expected_controlled(self, times, component=None):
+        """The controlled agent's expected path at ``times`` (s since onset) under component k
+        (k* if None), the phase speed marginalised: sum_m p_eta(alpha_m | D, k)
+        E[y_c(alpha_m t) | D, k, alpha_m] over :meth:`speed_hypotheses`. Under squared error
+        this is the best prediction the posterior allows; the MAP speed's path commits to one
+        timing, and when the speed is uncertain (a wave whose pace the prefix does not tell) a
+        path off by half a period errs more than the mean. Each hypothesis holds its final
+        posture after its own end (alpha_m t > 1). Returns (k, positions, velocities,
+        accelerations), each (len(times), Q)."""
+        k = self._map_indices()[0] if component is None else int(component)
+        times = np.asarray(times, dtype=float)
+        speeds, probs = self.speed_hypotheses(k)
+        mu_o = np.array([self._mu[g].reshape(-1, W)[:, lane]
+                         for g, lane in (self._lane(k, m) for m in speeds)])
+        basis = self.model.basis_
+        out = [np.zeros((times.size, self.model.n_controlled_)) for _ in range(3)]
+        for a, p, mean_c in zip(self.alphas[speeds], probs, self.controlled_mean(k, mu_o)):
+            for acc, part in zip(out, mean_trajectory(mean_c.reshape(-1, self.n_basis),
+                                                      a * times, basis.centers, basis.width,
+                                                      a)):
+                acc += p * part
+        return (k, *out)
+
     def predict_at_rest(self, y_final, component=None):
         """The controlled agent's final posture once the movement has ended: eq. 13 with D the
         final position of the observed agent at z = 1 (phase known), as in the thesis's
@@ -449,3 +516,38 @@ class OnlineEstimator:
         out = trajectory_distribution(mean, cov, self.model.basis_, [1.0], 1.0, dofs)
         return out['position'][0], out['position_cov'][0]
 
+
+
+# The speed weights training chooses from, and the points of a movement it scores them at.
+SPEED_WEIGHTS = (1.0, 0.5, 0.2, 0.1, 0.05, 0.02, 0.01, 0.0)
+SPEED_FRACTIONS = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
+
+
+def speed_log_scores(model, demonstrations, weights=SPEED_WEIGHTS, fractions=SPEED_FRACTIONS,
+                     n_alpha: int = 50, min_interval: float = 0.05):
+    """How well each speed weight eta predicts held-out movements' speeds: for every
+    demonstration (held out from ``model``) and every ``fraction`` of it, the log density that
+    the tempered posterior of the estimator's MAP component, after the estimator was fed that
+    first fraction online, puts at the movement's own speed 1/T (a proper score of the phase
+    posterior: core.phase.log_density_on_grid). Returns (summed log densities per weight (len
+    weights,), number of terms)."""
+    est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval)
+    M = len(est.alphas)
+    total, n = np.zeros(len(weights)), 0
+    for demo in demonstrations:
+        est.reset()
+        rows = np.flatnonzero(~np.isnan(demo.observed).any(axis=1))
+        j = 0
+        for f in fractions:
+            while j < len(rows) and demo.t[rows[j]] <= f * demo.duration + 1e-9:
+                est.update(float(demo.t[rows[j]]), demo.observed[rows[j]])
+                j += 1
+            if not est.n_observations:
+                continue
+            k = est.map_hypothesis()[0]
+            evidence = est.log_evidence_flat[k * M:(k + 1) * M]
+            prior = est._log_prior[k * M:(k + 1) * M]
+            total += [log_density_on_grid(tempered_speed_posterior(evidence, prior, w),
+                                          est.alphas, 1.0 / demo.duration) for w in weights]
+            n += 1
+    return total, n

@@ -10,6 +10,7 @@ import numpy as np
 from scipy.special import logsumexp
 
 from .basis import GaussianBasis
+from .numerics import logsumexp_rows
 
 
 def timing_variance(durations, periods):
@@ -73,6 +74,36 @@ def alpha_log_prior(grid, alpha_mean, alpha_std):
     sd = np.atleast_1d(alpha_std)[:, None]
     lp = -0.5 * ((grid[None, :] - mu) / sd) ** 2
     return lp - logsumexp(lp, axis=1, keepdims=True)
+
+
+def tempered_speed_weights(log_evidence, log_prior, weight: float):
+    """eta log p(D | k, alpha_m) + log p(alpha_m | k) (eta = ``weight``): the tempered posterior
+    of :func:`tempered_speed_posterior` before normalising; -inf where the evidence is."""
+    le = np.asarray(log_evidence, dtype=float)
+    gone = np.isneginf(le)
+    return np.where(gone, -np.inf, weight * np.where(gone, 0.0, le) + np.asarray(log_prior))
+
+
+def tempered_speed_posterior(log_evidence, log_prior, weight: float):
+    """log p_eta(alpha_m | D, k), normalised over the grid (last axis): eta log p(D | k, alpha_m)
+    + log p(alpha_m | k) (eta = ``weight``; eta = 1 is eq. 16 for one component, eta = 0 the
+    prior alone). A tempered likelihood is the generalised-Bayes update for a model the data
+    do not quite follow (Gruenwald's learning rate; Holmes & Walker 2017): here one constant
+    speed per movement, where people's speed drifts within one. -inf evidence (a pruned
+    hypothesis) stays -inf."""
+    lp = tempered_speed_weights(log_evidence, log_prior, weight)
+    rows = lp.reshape(-1, lp.shape[-1])
+    return (rows - logsumexp_rows(rows)[:, None]).reshape(lp.shape)
+
+
+def log_density_on_grid(log_posterior, grid, alpha) -> float:
+    """log of the density a grid posterior (log probabilities on the evenly spaced ``grid``)
+    puts at ``alpha``: the probabilities interpolated, over the grid step. Beyond the grid the
+    density is 0, floored at 1e-12 per unit alpha (every posterior on that grid gets the same
+    floor there, so comparisons between them are unaffected)."""
+    grid = np.asarray(grid, dtype=float)
+    p = np.interp(alpha, grid, np.exp(log_posterior), left=0.0, right=0.0)
+    return float(np.log(max(p / (grid[1] - grid[0]), 1e-12)))
 
 
 def design_matrix(basis: GaussianBasis, t, alpha: float, n_dofs: int):

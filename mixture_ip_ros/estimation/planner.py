@@ -356,10 +356,8 @@ class OnlinePlanner:
         est = self.estimator
         rec = self.current
         t_now = self.t_now
-        if t_end is not None and np.isfinite(t_end) and t_end > 0 and est.n_observations:
-            summary = end_summary(est, t_end)
-        else:
-            summary = posterior_summary(est, t_now)
+        ended = t_end is not None and np.isfinite(t_end) and t_end > 0 and est.n_observations
+        summary = end_summary(est, t_end) if ended else posterior_summary(est, t_now)
         k = summary.component
         rec.component, rec.label, rec.confidence = k, self.label(k), summary.confidence
         rec.alpha, rec.phase = summary.alpha, summary.phase
@@ -369,7 +367,8 @@ class OnlinePlanner:
             if t_now < clock_now <= t_now + MAX_LAG:
                 t_plan = clock_now
         plan = build_plan(est, t_plan, n_points=s.n_points, lookahead=s.lookahead,
-                          settle_time=s.settle_time, component=k, alpha=summary.alpha,
+                          settle_time=s.settle_time, component=k,
+                          alpha=summary.alpha if ended else None,
                           final_time=self._final_time, robot_q=self.robot_q,
                           catch_up_velocity=self.catch_up_velocity,
                           final_position=self._y_latest if final else None)

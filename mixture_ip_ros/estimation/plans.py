@@ -3,15 +3,19 @@ that goes with every replan.
 
 Time is seconds since the interaction's onset on the observations' clock (their stamps).
 
-Plan (:func:`build_plan`): under the MAP hypothesis (k*, alpha*), ``n_points`` phases evenly
-spaced from ``z_start = alpha* (t_now + lookahead)`` to 1, ``times = z / alpha*``, positions,
-velocities and accelerations of the conditioned robot trajectory (eq. 13); the first point lies
-``lookahead`` ahead of the present so the controller gets a reachable target, and the last
+Plan (:func:`build_plan`): under the MAP component k*, the robot's expected trajectory with the
+phase speed marginalised (OnlineEstimator.expected_controlled: each speed hypothesis's
+conditioned trajectory, eq. 13, weighted by its tempered posterior), at ``n_points`` times
+evenly spaced from ``t_now + lookahead`` to the end of the slowest speed hypothesis that holds
+the posterior, ``1 / min alpha_m``; or, for a given phase speed alpha (the end known), phases
+evenly spaced from ``alpha (t_now + lookahead)`` to 1 at ``times = z / alpha``. The first point
+lies ``lookahead`` ahead of the present so the controller gets a reachable target, and the last
 point's velocity and acceleration are zero (the human holds still past z = 1, and
-joint_trajectory_controller rejects a trajectory ending in motion). When ``z_start`` >= 1 (the
-human is at rest) the plan is a single point: the predicted final posture, reached
-``max(lookahead, settle_time)`` after ``t_now``; later final plans of the same interaction keep
-that time (while it is still ahead) so that the arrival does not recede with every replan.
+joint_trajectory_controller rejects a trajectory ending in motion). When ``t_now + lookahead``
+is past that end (the human is at rest) the plan is a single point: the predicted final
+posture, reached ``max(lookahead, settle_time)`` after ``t_now``; later final plans of the same
+interaction keep that time (while it is still ahead) so that the arrival does not recede with
+every replan.
 
 The phases (np.linspace) and the checks of a plan run as compiled kernels (estimation._fast),
 one call each with the values of the numpy statements they stand for.
@@ -80,10 +84,12 @@ def end_summary(estimator, t_end: float) -> PosteriorSummary:
 
 @dataclass(frozen=True)
 class Plan:
-    """Robot plan under one hypothesis (component, alpha).
+    """Robot plan under one component.
 
-    times (n,) s since onset; phases (n,); positions, velocities, accelerations (n, Q) in joint
-    order of the model. final: the human is at rest (single point at the final posture).
+    times (n,) s since onset; phases (n,) at those times under the phase speed ``alpha`` (the
+    MAP one when the plan marginalises the speed); positions, velocities, accelerations (n, Q)
+    in joint order of the model. final: the human is at rest (single point at the final
+    posture).
     """
 
     times: np.ndarray
@@ -100,7 +106,8 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
                settle_time: float = 0.5, component: Optional[int] = None,
                alpha: Optional[float] = None, final_time: Optional[float] = None,
                robot_q=None, catch_up_velocity=None, final_position=None) -> Plan:
-    """The plan from ``t_now`` (s since onset) on, for (component, alpha) (default: the MAP).
+    """The plan from ``t_now`` (s since onset) on, for ``component`` (default: the MAP one),
+    the phase speed marginalised, or at phase speed ``alpha`` if given.
 
     ``final_time``: when the human is at rest, the time of the final point if it is at least
     ``lookahead`` ahead of ``t_now`` (else ``t_now + max(lookahead, settle_time)``).
@@ -116,23 +123,36 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
         raise ValueError(f'n_points must be >= 2, got {n_points}')
     if not np.isfinite(t_now) or t_now < 0:
         raise ValueError(f't_now must be finite and >= 0, got {t_now}')
-    if component is None or alpha is None:
-        k_map, a_map = estimator.map_hypothesis()
-        component = k_map if component is None else component
-        alpha = a_map if alpha is None else alpha
+    if component is None:
+        component = estimator.map_hypothesis()[0]
+    marginal = alpha is None
+    if marginal:
+        speeds, p = estimator.speed_hypotheses(component)
+        t_end = 1.0 / float(estimator.alphas[speeds].min())
+        alpha = estimator.alphas[speeds[int(np.argmax(p))]]
     a = float(alpha)
-    z_start = a * (t_now + lookahead)
-    final = final_position is not None or z_start >= 1.0 - PHASE_EPS
+    if not marginal:
+        t_end = 1.0 / a
+    final = final_position is not None or t_now + lookahead >= t_end * (1.0 - PHASE_EPS)
     if final:
-        phases = np.array([1.0])
         if final_time is None or not final_time >= t_now + lookahead:
             final_time = t_now + max(lookahead, settle_time)
         times = np.array([float(final_time)])
+        phases = np.array([1.0])
+    elif marginal:
+        times = linspace(t_now + lookahead, t_end, n_points)
+        phases = np.minimum(a * times, 1.0)
     else:
-        phases = linspace(z_start, 1.0, n_points)
+        phases = linspace(a * (t_now + lookahead), 1.0, n_points)
         times = phases / a
-    # a: the grid value actually used (identical when it came from the grid)
-    k, a, (pos, vel, acc), _ = estimator.mean_trajectories(phases, component=component, alpha=a)
+    if marginal:
+        # past every hypothesis's end (a final plan) each one holds its final posture
+        k, pos, vel, acc = estimator.expected_controlled(
+            np.maximum(times, t_end) if final else times, component=component)
+    else:
+        # a: the grid value actually used (identical when it came from the grid)
+        k, a, (pos, vel, acc), _ = estimator.mean_trajectories(phases, component=component,
+                                                               alpha=a)
     vel[-1] = 0.0
     acc[-1] = 0.0
     if final_position is not None:
@@ -155,9 +175,8 @@ def predicted_paths(estimator, n_points: int, components=None):
     (n_points, P)) for ``components`` (default: all)."""
     phases = linspace(0.0, 1.0, n_points)
     out = []
-    joint = estimator.joint_posterior()
     for k in (range(estimator.n_components) if components is None else components):
-        alpha = float(estimator.alphas[int(np.argmax(joint[k]))])
+        alpha = float(estimator.alphas[int(np.argmax(estimator.speed_posterior(k)))])
         _, a, _, positions = estimator.mean_trajectories((), phases, component=k, alpha=alpha)
         out.append((int(k), a, phases / a, positions))
     return out

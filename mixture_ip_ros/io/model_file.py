@@ -28,7 +28,7 @@ FORMAT_VERSION = 3
 _READABLE_VERSIONS = (1, 2, 3)
 _PARAMS = ('n_components', 'n_basis', 'method', 'ridge', 'prior_strength', 'prior_scale',
            'max_iter', 'tol', 'n_init', 'random_state', 'observation_noise', 'noise',
-           'noise_var')
+           'noise_var', 'speed_weight')
 _ARRAYS = ('weights', 'means', 'covariances', 'noise_var', 'alpha_mean', 'alpha_std',
            'prior_cov', 'noise_time')
 
@@ -53,6 +53,7 @@ def save_model(path, model: MixtureIProMP, *, layout: Layout = None, observed_na
     to '' = unspecified). The model's ``novelty_`` thresholds (core.novelty, calibrated at
     training) are kept when it has them."""
     model._check_fitted()
+    model._check_params()
     if layout is None:
         if observed_names is None or controlled_names is None:
             raise ValueError('save_model needs a layout or observed_names and controlled_names')
@@ -170,6 +171,10 @@ def load_model(path, *, observed_names=None, controlled_names=None):
         if given is not None and list(given) != meta.get(key):
             fail(f'{key} {meta.get(key)} do not match the expected {list(given)}')
     model = MixtureIProMP(**{p: params[p] for p in _PARAMS if p in params})
+    try:
+        model._check_params()
+    except (TypeError, ValueError) as e:
+        fail(f'invalid parameters ({e})')
     model.basis_ = basis
     model.n_observed_, model.n_controlled_ = P, Q
     for name in _ARRAYS:

@@ -84,10 +84,11 @@ def evaluate_box_assembly(demos, out_dir: Path, config: EvalConfig = None,
             j = feed_until(est, test, rows, j, f * test.duration)
             if est.n_observations == 0:
                 continue
-            pred = est.predict([1.0])
-            online_correct[b, c] = names[pred['component']] == test.label
-            q = pred['controlled']['position'][0]
-            online_err[b, c] = np.linalg.norm(kin.fk(q)[0] - q_true)
+            # the final posture the plan heads for: every phase speed's, weighted by its
+            # posterior (each has ended by t = inf)
+            k, q = est.expected_controlled([np.inf])[:2]
+            online_correct[b, c] = names[k] == test.label
+            online_err[b, c] = np.linalg.norm(kin.fk(q[0])[0] - q_true)
         if example is None or (test.label == 'plate' and example[1].label != 'plate'):
             example = (model, test, y_obs, z_obs, k)
 

@@ -11,9 +11,10 @@ calibrated), labels only name its components afterwards (majority). Per fold:
   its whole observed path (eq. 11, phase known);
 - online, phase unknown, as the estimator node works (OnlineEstimator fed the first 30, 50, 70,
   100 % of the observed agent at its decimation rate): the interaction recognised (the MAP
-  component's name), and the controlled agent predicted over the rest of the interaction under
-  the MAP (component, phase speed) against the recorded one: RMS over the remaining samples and
-  the error at the last one;
+  component's name), and the controlled agent predicted over the rest of the interaction as the
+  node plans it (the MAP component's expected path, the phase speed marginalised under the
+  speed weight training calibrated) against the recorded one: RMS over the remaining samples
+  and the error at the last one;
 - the same for the model with K = 1, the supervised model (one component per interaction)
   and, to tell the choice of K from the rest, the unsupervised model with K the number of
   interactions (``true_k_accuracy_by_fraction``); for the model with K chosen, the interaction
@@ -86,11 +87,8 @@ class _Online:
             t_f = f * demo.duration + 1e-9
             j = feed_until(est, demo, rows, j, t_f)
             rest = np.flatnonzero((demo.t > t_f) & ~np.isnan(demo.controlled).any(axis=1))
-            k, alpha = est.map_hypothesis()
-            pred = None
-            if rest.size:
-                z = np.clip(alpha * demo.t[rest], 0.0, 1.0)
-                pred = est.mean_trajectories(z, component=k, alpha=alpha)[2][0]
+            k = est.map_hypothesis()[0]
+            pred = est.expected_controlled(demo.t[rest], component=k)[1] if rest.size else None
             out.append((int(k), pred, rest))
         return out
 
@@ -177,6 +175,7 @@ def evaluate_labelled(demos, out_dir: Path, config: EvalConfig = None, name: str
         per_fold.append({'n_components': int(info['n_components']),
                          'prior_scale': info['prior_scale'],
                          'clear_optimum': bool(info['selection']['clear_optimum']),
+                         'speed_weight': info['speed_weight'],
                          'curve': info['selection']['mean'],
                          'ari': _ari(labels[train_i], comp_train),
                          'heldout_ari': _ari(labels[test_i], heldout),
