@@ -178,7 +178,11 @@ def page(R: dict) -> str:
                  lambda m: cm(m['supervised_partner_rms_cm_by_fraction'])),
                 ('partner RMS, nearest neighbour',
                  lambda m: cm(m['baseline_nn_partner_rms_cm_by_fraction'])),
-                ('partner at the end, mixture', lambda m: cm(m['partner_final_cm_by_fraction']))]
+                ('partner at the end, mixture', lambda m: cm(m['partner_final_cm_by_fraction'])),
+                ('partner at the end, nearest neighbour',
+                 lambda m: cm(m['baseline_nn_partner_final_cm_by_fraction'])),
+                ('speed weight per fold (training calibrates it)',
+                 lambda m: ', '.join(f"{p['speed_weight']:g}" for p in m['folds']))]
         L += [f'| {name} | {f(v1)} | {f(v2)} |' for name, f in rows] + ['']
     demos = [(r, R.get(f'demo_{r}')) for r in ROBOTS]
     if any(d for _, d in demos):
