@@ -20,7 +20,7 @@ calibrated for it on held-out folds (the robot's floor where there is a controll
 
 Why not the held-out likelihood of the full model: a dozen demonstrations per pattern against
 45-150 weights; on real interactions (NuiSI) that curve picked K = 1 for four and six plainly
-distinct interactions, while the pattern space finds them (README, "Real interactions").
+distinct interactions, while the pattern space finds them (docs/results.md, NuiSI).
 """
 
 import inspect
