@@ -151,9 +151,9 @@ def loop_errors(record, scene, recording) -> dict:
 def offline_errors(model, scene, recording, bag, fraction: float) -> dict:
     """The same model offline: OnlineEstimator (the nodes' settings: 50 alphas, 20 Hz) fed the
     replayed movement up to ``fraction`` of it, phase unknown; the controlled agent it predicts
-    for the rest (MAP component, phase speed marginalised, as the nodes plan) as flange positions (FK)
-    against where the partner's hand was: RMS over the rest of the movement, and at its end
-    (z = 1) against the partner's last position (cm). The movement is the one the observer
+    for the rest (MAP component, phase speed marginalised, as the nodes plan) as flange
+    positions (FK) against where the partner's hand was: RMS over the rest of the movement, and
+    at its end (every speed's z = 1) against the partner's last position (cm). The movement is the one the observer
     finds (the bag segmented as training segments it)."""
     opts = loading(scene, cut='detected')
     demo = load_demonstration(bag, **opts)
