@@ -542,3 +542,29 @@ def test_log_density_on_grid_is_the_density_of_a_fine_grid_posterior():
         assert log_density_on_grid(lp, grid, a) == pytest.approx(norm.logpdf(a, 1.0, 0.1),
                                                                  abs=1e-3)
     assert log_density_on_grid(lp, grid, 2.5) == pytest.approx(np.log(1e-12))
+
+
+def test_pruning_keeps_the_speeds_the_tempered_posterior_holds(model_and_demos):
+    """A speed the exact posterior rules out but the tempered one (what the plans read) still
+    holds is not pruned; a component with nothing left is refused by name."""
+    import copy
+    model, demos, _ = model_and_demos
+    tempered = copy.copy(model)
+    tempered.speed_weight = 0.0
+    full = OnlineEstimator(tempered, n_alpha=30)
+    pruned = OnlineEstimator(tempered, n_alpha=30, prune_below=1e-4)
+    exact = OnlineEstimator(model, n_alpha=30, prune_below=1e-4)
+    for est in (full, pruned, exact):
+        _feed(est, demos[4], 0.4, 3)
+    k = full.map_hypothesis()[0]
+    share = full.component_posterior()[k] * full.speed_posterior(k)
+    kept = pruned.log_evidence[k] > -np.inf
+    assert np.all(kept[share >= 1e-4])
+    assert kept.sum() > (exact.log_evidence[k] > -np.inf).sum()
+    t = np.linspace(0.5, 3.0, 20)
+    assert np.allclose(pruned.expected_controlled(t, k)[1], full.expected_controlled(t, k)[1],
+                       atol=1e-3 * np.abs(full.expected_controlled(t, k)[1]).max())
+    gone = [c for c in range(model.n_components) if np.all(exact.log_evidence[c] == -np.inf)]
+    assert gone
+    with pytest.raises(ValueError, match=f'every hypothesis of component {gone[0]} was pruned'):
+        exact.expected_controlled(t, gone[0])

@@ -130,3 +130,16 @@ def test_the_speed_weight_is_one_for_constant_speeds_and_less_where_the_speed_dr
     # given, it is kept
     assert train(_timed_demos(0, True), n_components=1, n_basis=10,
                  speed_weight=0.3)[0].speed_weight == 0.3
+
+
+def test_em_training_of_demonstrations_missing_an_agent_keeps_the_configured_speed_weight():
+    """The speed weight is calibrated on regression fits, which a demonstration without one
+    agent cannot have; EM, which learns from such demonstrations, keeps the configured weight
+    (as it keeps the configured floor)."""
+    demos = mixture_demos(seed=0)[0]
+    gappy = [Demonstration(d.t, d.observed, np.full_like(d.controlled, np.nan) if i % 4 == 0
+                           else d.controlled, label=d.label) for i, d in enumerate(demos)]
+    model, info = train(gappy, n_components=3, method='em', n_basis=8)
+    assert model.speed_weight == info['speed_weight'] == 1.0 and 'speed_scores' not in info
+    assert train(gappy, n_components=3, method='em', n_basis=8,
+                 speed_weight=0.2)[0].speed_weight == 0.2

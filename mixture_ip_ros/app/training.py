@@ -138,7 +138,9 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
                 demos, n_components, n_folds, progress, prior_scales, curve_params)}
         if 'selection' in info:
             info['selection']['prior_scale'] = params.get('prior_scale')
-    if 'speed_weight' not in params:
+    # The same for the speed weight; EM's demonstrations may lack a whole agent, which the
+    # regression fits of the calibration cannot take: EM keeps the configured weight.
+    if 'speed_weight' not in params and params.get('method') != 'em':
         weight, scores = _calibrated_speed_weight(demos, n_components, labels, n_folds,
                                                   {**params, 'method': 'regression'})
         params = {**params, 'speed_weight': weight}

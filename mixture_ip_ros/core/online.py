@@ -59,7 +59,8 @@ class OnlineEstimator:
     the phase speed of a component is read from its tempered posterior
     p(alpha | D, k) ~ p(D | k, alpha)^eta p(alpha | k), eta the model's ``speed_weight``
     (core.phase.tempered_speed_posterior; 1 gives eq. 16): the MAP alpha, the phase and the
-    plans follow it. Pruning reads the exact joint posterior.
+    plans follow it. Pruning keeps a hypothesis while its exact joint posterior or its share of
+    the tempered one, p(k | D) p_eta(alpha | D, k), is at least ``prune_below``.
 
     Between and beyond the grid: the samples absorbed are kept (time and position, in the order
     absorbed), so that a hypothesis the grid does not hold can be evaluated exactly when asked
@@ -201,14 +202,15 @@ class OnlineEstimator:
             return 0
         hyp = self._hyp[:self.n_tracked]
         joint = self.joint_posterior().ravel().copy()
-        keep = joint[hyp] >= self.prune_below
+        share = np.maximum(joint, self._tempered_joint().ravel())
+        keep = share[hyp] >= self.prune_below
         dropped = hyp[~keep]
         self.pruned_mass += float(joint[dropped].sum())
         joint[dropped] = 0.0
         joint /= joint.sum()
         self._joint = joint.reshape(self.n_components, -1)
         self._joint.flags.writeable = False
-        self._smallest = joint[hyp[keep]].min()
+        self._smallest = share[hyp[keep]].min()
         n = int(keep.sum())
         src = np.flatnonzero(keep)
         compact_lanes(self._cov, src)
@@ -220,6 +222,16 @@ class OnlineEstimator:
         self._col[self._hyp[:n]] = np.arange(n)
         self.n_tracked = n
         return len(dropped)
+
+    def _tempered_joint(self):
+        """p(k | D) p_eta(alpha_m | D, k), (K, M): each hypothesis's share of what the plans
+        read (0 for a component with nothing tracked)."""
+        if self.speed_weight == 1.0:
+            return self.joint_posterior()
+        M = len(self.alphas)
+        lp = tempered_speed_posterior(self.log_evidence_flat.reshape(-1, M),
+                                      self._log_prior.reshape(-1, M), self.speed_weight)
+        return self.component_posterior()[:, None] * np.exp(lp)
 
     def _checked(self, y) -> np.ndarray:
         y = np.asarray(y, dtype=float)
@@ -288,16 +300,22 @@ class OnlineEstimator:
         k = self._map_indices()[0] if component is None else int(component)
         return np.exp(self._speed_log_posterior(k))
 
-    def _speed_log_posterior(self, k):
+    def _speed_terms(self, k):
+        """(log p(D | k, alpha_m), log p(k) p(alpha_m | k)) over the grid; ValueError when every
+        hypothesis of component k was pruned."""
         M = len(self.alphas)
-        return tempered_speed_posterior(self.log_evidence_flat[k * M:(k + 1) * M],
-                                        self._log_prior[k * M:(k + 1) * M], self.speed_weight)
+        evidence = self.log_evidence_flat[k * M:(k + 1) * M]
+        if np.isneginf(evidence).all():
+            raise ValueError(f'every hypothesis of component {k} was pruned (posterior below '
+                             f'prune_below={self.prune_below:g})')
+        return evidence, self._log_prior[k * M:(k + 1) * M]
+
+    def _speed_log_posterior(self, k):
+        return tempered_speed_posterior(*self._speed_terms(k), self.speed_weight)
 
     def _speed_log_weights(self, k):
         """:meth:`_speed_log_posterior` before normalising (what an argmax or a ratio needs)."""
-        M = len(self.alphas)
-        return tempered_speed_weights(self.log_evidence_flat[k * M:(k + 1) * M],
-                                      self._log_prior[k * M:(k + 1) * M], self.speed_weight)
+        return tempered_speed_weights(*self._speed_terms(k), self.speed_weight)
 
     def alpha_posterior(self):
         """p(alpha_m | D) = sum_k p(k | D) p_eta(alpha_m | D, k) (eq. 16 with the component
@@ -307,7 +325,8 @@ class OnlineEstimator:
                    if pk[k] > 0.0)
 
     def map_hypothesis(self):
-        """(k*, alpha*): the most probable component (eq. 12) and, for it, the MAP alpha (eq. 20)."""
+        """(k*, alpha*): the most probable component (eq. 12) and, for it, the grid's MAP alpha
+        of the tempered speed posterior (eq. 20 when the speed weight is 1)."""
         k, m = self._map_indices()
         return k, float(self.alphas[m])
 

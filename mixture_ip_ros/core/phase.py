@@ -90,10 +90,14 @@ def tempered_speed_posterior(log_evidence, log_prior, weight: float):
     prior alone). A tempered likelihood is the generalised-Bayes update for a model the data
     do not quite follow (Gruenwald's learning rate; Holmes & Walker 2017): here one constant
     speed per movement, where people's speed drifts within one. -inf evidence (a pruned
-    hypothesis) stays -inf."""
+    hypothesis) stays -inf, and so does a row with nothing left."""
     lp = tempered_speed_weights(log_evidence, log_prior, weight)
     rows = lp.reshape(-1, lp.shape[-1])
-    return (rows - logsumexp_rows(rows)[:, None]).reshape(lp.shape)
+    norm = logsumexp_rows(rows)
+    out = np.full_like(rows, -np.inf)
+    alive = np.isfinite(norm)
+    out[alive] = rows[alive] - norm[alive, None]
+    return out.reshape(lp.shape)
 
 
 def log_density_on_grid(log_posterior, grid, alpha) -> float:

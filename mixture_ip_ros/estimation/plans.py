@@ -1,5 +1,5 @@
-"""The robot's plan under one hypothesis (component, phase speed), and the posterior summary
-that goes with every replan.
+"""The robot's plan under one component (its phase speed marginalised, or one given), and the
+posterior summary that goes with every replan.
 
 Time is seconds since the interaction's onset on the observations' clock (their stamps).
 

@@ -7,7 +7,9 @@ refuses a mismatched or corrupt file with a ModelFileError naming the file and t
 The metadata names every DOF and its unit, in column order: ``observed_names``,
 ``observed_units`` (P each), ``controlled_names``, ``controlled_units`` (Q each, Q >= 0);
 ``load_model(path)[1]`` returns it, :func:`model_layout` as a Layout. Format 1 files (wrist +
-iiwa only, before units were recorded) load with units 'm' and 'rad'.
+iiwa only, before units were recorded) load with units 'm' and 'rad'; files before format 4
+(before the phase-speed weight) load with weight 1, the posterior they were used with. Format 4
+is written so that an older package, which would drop the weight, refuses the file instead.
 """
 
 import json
@@ -24,8 +26,8 @@ from mixture_ip_ros.core.novelty import NoveltyThresholds
 from mixture_ip_ros.io.files import write_atomic
 
 FORMAT = 'mixture_ip_ros/mixture-iprompt'
-FORMAT_VERSION = 3
-_READABLE_VERSIONS = (1, 2, 3)
+FORMAT_VERSION = 4
+_READABLE_VERSIONS = (1, 2, 3, 4)
 _PARAMS = ('n_components', 'n_basis', 'method', 'ridge', 'prior_strength', 'prior_scale',
            'max_iter', 'tol', 'n_init', 'random_state', 'observation_noise', 'noise',
            'noise_var', 'speed_weight')

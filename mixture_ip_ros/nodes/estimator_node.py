@@ -8,13 +8,16 @@ Subscribes  observation_topic  geometry_msgs/PointStamped (frame observed_frame)
 Publishes   trajectory_topic   trajectory_msgs/JointTrajectory, reliable: header.stamp = the
                 stamp of the latest observation the plan rests on (what triggered it; the
                 'end' event's stamp for the last plan), joint names of the model, points from
-                the present (plus lookahead) to z = 1 with positions, velocities,
-                accelerations; header.stamp + time_from_start = onset + z / alpha*. Sent once
+                the present (plus lookahead) to the end of the slowest phase speed holding the
+                posterior, positions, velocities, accelerations of the expected trajectory with
+                the speed marginalised (estimation.plans); header.stamp + time_from_start =
+                onset + the time of each point. Sent once
                 p(k* | D) >= confidence_threshold with >= min_observations used, then at
                 replan_rate_hz while new observations arrive, and a last time on 'end'.
                 Deactivating sends an empty trajectory: the controller stops and holds.
-            path_topic         nav_msgs/Path: the whole predicted wrist movement of the plan's
-                hypothesis, phases 0..1, pose stamps = onset + z / alpha*.
+            path_topic         nav_msgs/Path: the whole predicted wrist movement under the
+                plan's component at its MAP phase speed alpha*, phases 0..1, pose stamps =
+                onset + z / alpha*.
             posterior_topic    std_msgs/Float64MultiArray, one dimension labelled
                 'p0,..,p{K-1},alpha,phase,confidence,component' (PosteriorSummary.as_array).
             marker_topic       visualization_msgs/MarkerArray for RViz, in observed_frame: the

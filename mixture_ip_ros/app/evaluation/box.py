@@ -49,7 +49,8 @@ def evaluate_box_assembly(demos, out_dir: Path, config: EvalConfig = None,
     t0 = time.perf_counter()
     shipped, info = trained(demos, config)
     K = info['n_components']
-    params = {**config.model, 'prior_scale': info['prior_scale']}
+    params = {**config.model, 'prior_scale': info['prior_scale'],
+              'speed_weight': info['speed_weight']}
     t_train = time.perf_counter() - t0
     rms, _ = loo_by_components(demos, candidates, folds, params)
     t_loo = time.perf_counter() - t0 - t_train
@@ -86,8 +87,8 @@ def evaluate_box_assembly(demos, out_dir: Path, config: EvalConfig = None,
                 continue
             # the final posture the plan heads for: every phase speed's, weighted by its
             # posterior (each has ended by t = inf)
-            k, q = est.expected_controlled([np.inf])[:2]
-            online_correct[b, c] = names[k] == test.label
+            k_online, q = est.expected_controlled([np.inf])[:2]
+            online_correct[b, c] = names[k_online] == test.label
             online_err[b, c] = np.linalg.norm(kin.fk(q[0])[0] - q_true)
         if example is None or (test.label == 'plate' and example[1].label != 'plate'):
             example = (model, test, y_obs, z_obs, k)
@@ -116,6 +117,7 @@ def evaluate_box_assembly(demos, out_dir: Path, config: EvalConfig = None,
         'n_components_selected': int(K),
         'k_selection': info.get('selection'),
         'prior_scale': info['prior_scale'],
+        'speed_weight': info['speed_weight'],
         'n_components_thesis_loo': int(candidates[select_n_components(rms)]),
         'selection_accuracy_final': float(np.mean(final_correct)),
         'selection_accuracy_by_fraction': {f'{f:g}': by_fraction[f'{f:g}'] for f in REPORT_FRACTIONS

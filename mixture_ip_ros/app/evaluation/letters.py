@@ -100,6 +100,7 @@ def evaluate_phase(data, out_dir: Path, config: EvalConfig = None) -> dict:
         'alpha_rel_error_median_at_40': float(np.median(err[:, c40] / true_alpha)),
         'alpha_grid_step': step,
         'prior_scale': info['prior_scale'],
+        'speed_weight': info['speed_weight'],
         'units': {'rms': 'letter units (letter height ~2), per coordinate, [mean, std] over test '
                          'letters', 'alpha_accuracy_at_40': 'fraction of test letters whose MAP '
                          'alpha is within one grid step of the true alpha'},

@@ -43,7 +43,8 @@ def evaluate_pole(demos, out_dir: Path, config: EvalConfig = None, kinematics=No
     # at that floor beside it.
     _, info = trained(demos, config)
     K_selected = info['n_components']
-    params = {**config.model, 'prior_scale': info['prior_scale']}
+    params = {**config.model, 'prior_scale': info['prior_scale'],
+              'speed_weight': info['speed_weight']}
     if K_selected not in candidates:
         candidates = sorted(set(candidates) | {K_selected})
     rms, preds = loo_by_components(demos, candidates, folds, params, keep_predictions=True)
@@ -100,6 +101,7 @@ def evaluate_pole(demos, out_dir: Path, config: EvalConfig = None, kinematics=No
         'n_components_selected': int(K_selected),
         'k_selection': info.get('selection'),
         'prior_scale': info['prior_scale'],
+        'speed_weight': info['speed_weight'],
         'n_components_thesis_loo': int(candidates[select_n_components(rms)]),
         'n_components_compared': int(K),
         'rms_vs_k': rms_vs_k_dict(candidates, rms),
