@@ -153,8 +153,8 @@ def offline_errors(model, scene, recording, bag, fraction: float) -> dict:
     replayed movement up to ``fraction`` of it, phase unknown; the controlled agent it predicts
     for the rest (MAP component, phase speed marginalised, as the nodes plan) as flange
     positions (FK) against where the partner's hand was: RMS over the rest of the movement, and
-    at its end (every speed's z = 1) against the partner's last position (cm). The movement is the one the observer
-    finds (the bag segmented as training segments it)."""
+    at its end (every speed's z = 1) against the partner's last position (cm). The movement is
+    the one the observer finds (the bag segmented as training segments it)."""
     opts = loading(scene, cut='detected')
     demo = load_demonstration(bag, **opts)
     _, t_onset, _ = segment_recording(read_bag(bag, joint_names=scene.robot.joint_names),
