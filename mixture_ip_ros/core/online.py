@@ -427,8 +427,13 @@ class OnlineEstimator:
         """Posterior N(mean, cov) of the observed agent's weights under hypothesis (k, m).
         Raises ValueError if that hypothesis was pruned."""
         g, lane = self._lane(k, m)
-        return (self._mu[g].reshape(-1, W)[:, lane].copy(),
-                self._cov[g].reshape(-1, W)[:, lane][self._tri])
+        return self._observed_mean(k, m).copy(), self._cov[g].reshape(-1, W)[:, lane][self._tri]
+
+    def _observed_mean(self, k, m):
+        """The posterior mean of the observed weights under hypothesis (k, m), a view of the
+        kernel's state (no covariance built)."""
+        g, lane = self._lane(k, m)
+        return self._mu[g].reshape(-1, W)[:, lane]
 
     def _lane(self, k, m):
         """(group, lane) of hypothesis (k, m) in the kernel's state."""
@@ -468,8 +473,7 @@ class OnlineEstimator:
         k, m = self._hypothesis(component, alpha)
         a = float(self.alphas[m])
         basis = self.model.basis_
-        g, lane = self._lane(k, m)
-        mu_o = self._mu[g].reshape(-1, W)[:, lane]      # the mean only: no covariance built
+        mu_o = self._observed_mean(k, m)
         # Only what is asked for (the estimator node asks for one agent at a time).
         z_c = np.asarray(z_controlled, dtype=float)
         if z_c.size:
@@ -508,8 +512,7 @@ class OnlineEstimator:
         k = self._map_indices()[0] if component is None else int(component)
         times = np.asarray(times, dtype=float)
         speeds, probs = self.speed_hypotheses(k)
-        mu_o = np.array([self._mu[g].reshape(-1, W)[:, lane]
-                         for g, lane in (self._lane(k, m) for m in speeds)])
+        mu_o = np.array([self._observed_mean(k, m) for m in speeds])
         basis = self.model.basis_
         out = [np.zeros((times.size, self.model.n_controlled_)) for _ in range(3)]
         for a, p, mean_c in zip(self.alphas[speeds], probs, self.controlled_mean(k, mu_o)):
@@ -536,7 +539,6 @@ class OnlineEstimator:
         return out['position'][0], out['position_cov'][0]
 
 
-
 # The speed weights training chooses from, and the points of a movement it scores them at.
 SPEED_WEIGHTS = (1.0, 0.5, 0.2, 0.1, 0.05, 0.02, 0.01, 0.0)
 SPEED_FRACTIONS = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
@@ -551,7 +553,6 @@ def speed_log_scores(model, demonstrations, weights=SPEED_WEIGHTS, fractions=SPE
     posterior: core.phase.log_density_on_grid). Returns (summed log densities per weight (len
     weights,), number of terms)."""
     est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval)
-    M = len(est.alphas)
     total, n = np.zeros(len(weights)), 0
     for demo in demonstrations:
         est.reset()
@@ -563,10 +564,8 @@ def speed_log_scores(model, demonstrations, weights=SPEED_WEIGHTS, fractions=SPE
                 j += 1
             if not est.n_observations:
                 continue
-            k = est.map_hypothesis()[0]
-            evidence = est.log_evidence_flat[k * M:(k + 1) * M]
-            prior = est._log_prior[k * M:(k + 1) * M]
-            total += [log_density_on_grid(tempered_speed_posterior(evidence, prior, w),
-                                          est.alphas, 1.0 / demo.duration) for w in weights]
+            terms = est._speed_terms(est.map_hypothesis()[0])
+            total += [log_density_on_grid(tempered_speed_posterior(*terms, w), est.alphas,
+                                          1.0 / demo.duration) for w in weights]
             n += 1
     return total, n

@@ -129,9 +129,9 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
     if marginal:
         speeds, p = estimator.speed_hypotheses(component)
         t_end = 1.0 / float(estimator.alphas[speeds].min())
-        alpha = estimator.alphas[speeds[int(np.argmax(p))]]
-    a = float(alpha)
-    if not marginal:
+        a = float(estimator.alphas[speeds[int(np.argmax(p))]])
+    else:
+        a = float(alpha)
         t_end = 1.0 / a
     final = final_position is not None or t_now + lookahead >= t_end * (1.0 - PHASE_EPS)
     if final:

@@ -98,8 +98,9 @@ def _recorded_cut(rec: RawRecording, source: str) -> tuple:
     """The (onset, end) the bag records, seconds on the recording's time base."""
     custom = rec.custom_data or {}
     if ONSET_KEY not in custom or END_KEY not in custom:
-        raise NoRecordedInterval(source, f'no recorded movement interval ({ONSET_KEY}, {END_KEY} in its '
-                               "metadata custom_data); load it with cut='detected'")
+        raise NoRecordedInterval(source, f'no recorded movement interval ({ONSET_KEY}, '
+                                         f"{END_KEY} in its metadata custom_data); load it "
+                                         "with cut='detected'")
     try:
         onset_ns, end_ns = int(custom[ONSET_KEY]), int(custom[END_KEY])
     except (TypeError, ValueError):
