@@ -68,7 +68,7 @@ def plain_heldout(demos, candidates, fractions=(), prior_scales=(), n_folds=5, p
     controlled agent's RMS) by the straightforward loop (one fit per fold and floor)."""
     import numpy as np
     from mixture_ip_ros.core.mixture import MixtureIProMP
-    from mixture_ip_ros.core.selection import controlled_rms, cv_folds
+    from mixture_ip_ros.core.selection import cv_folds, online_rms
     fold = cv_folds(len(demos), n_folds, fold_seed)
     scales = [float(s) for s in prior_scales]
     params = {k: v for k, v in params.items() if k != 'prior_scale'}
@@ -81,21 +81,21 @@ def plain_heldout(demos, candidates, fractions=(), prior_scales=(), n_folds=5, p
                 model = MixtureIProMP(n_components=K, prior_scale=scale, **params).fit(
                     [d for d, g in zip(demos, fold) if g != f])
                 S['loglik'][b, a, test] = model.score_demonstrations([demos[i] for i in test])
-                S['controlled_rms'][b, a, test] = [controlled_rms(model, demos[i])
+                S['controlled_rms'][b, a, test] = [online_rms(model, demos[i])
                                                    for i in test]
     out = {}
     for name, scores in S.items():
         mean = scores.mean(axis=2)
         if name == 'controlled_rms':
-            # the lowest RMS among the floors whose log-likelihood is within two paired
+            # the best log-likelihood among the floors whose online RMS is within two paired
             # standard errors of the best floor's
             best = []
             for a in range(len(candidates)):
-                ll = S['loglik'][:, a]
-                top = ll[np.argmax(ll.mean(axis=1))]
-                allowed = [b for b in range(len(scales)) if (top - ll[b]).mean()
-                           <= 2 * (top - ll[b]).std(ddof=1) / np.sqrt(len(demos))]
-                best.append(min(allowed, key=lambda b: mean[b, a]))
+                rms = scores[:, a]
+                low = rms[np.argmin(rms.mean(axis=1))]
+                allowed = [b for b in range(len(scales)) if (rms[b] - low).mean()
+                           <= 2 * (rms[b] - low).std(ddof=1) / np.sqrt(len(demos))]
+                best.append(max(allowed, key=lambda b: S['loglik'][b, a].mean()))
             best = np.array(best)
         else:
             best = np.argmax(mean, axis=0)

@@ -13,7 +13,7 @@ from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.selection import COMPLETION_FRACTIONS
 from mixture_ip_ros.core.selection import (calibrated_heldout_curves, controlled_rms, cv_folds,
-                                           score_completion, selection_curve)
+                                           online_rms, score_completion, selection_curve)
 from mixture_ip_ros.core.promp import (log_evidence, observation_stats, stack_stats,
                                        weight_posterior)
 from mixture_ip_ros.scenarios.synthetic import mixture_demos, random_spd
@@ -98,8 +98,8 @@ def test_batched_posterior_means_equal_weight_posterior():
 
 @pytest.mark.parametrize('n_ctrl', [0, 2])
 def test_completion_curves_equal_the_straightforward_loop(n_ctrl):
-    """Every held-out curve from the same fits; with a controlled agent also the thesis's
-    criterion (the controlled agent predicted from the final observed position)."""
+    """Every held-out curve from the same fits; with a controlled agent also the robot's
+    criterion (the controlled agent predicted online from the observed agent's beginning)."""
     demos = mixture_demos(seed=5, n_obs=2, n_ctrl=n_ctrl, counts=(8, 9, 7))[0]
     candidates, scales = [1, 2, 3], [1.0, 0.01]
     cal = calibrated_heldout_curves(demos, candidates, (0.3, 0.6), scales, n_basis=8)
@@ -117,7 +117,7 @@ def test_completion_curves_equal_the_straightforward_loop(n_ctrl):
                 density[b, a, test], rms[b, a, test] = dd.mean(axis=1), rr.mean(axis=1)
                 ll[b, a, test] = model.score_demonstrations([demos[i] for i in test])
                 if n_ctrl:
-                    ctrl[b, a, test] = [controlled_rms(model, demos[i]) for i in test]
+                    ctrl[b, a, test] = [online_rms(model, demos[i]) for i in test]
     best = np.argmax(density.mean(axis=2), axis=0)
     assert cal['completion']['prior_scale'] == [scales[i] for i in best]
     assert np.allclose(cal['completion']['scores'], density[best, range(3)], rtol=1e-10)
@@ -125,15 +125,15 @@ def test_completion_curves_equal_the_straightforward_loop(n_ctrl):
     best = np.argmin(rms.mean(axis=2), axis=0)                      # lower RMS is better
     assert cal['completion_rms']['prior_scale'] == [scales[i] for i in best]
     if n_ctrl:
-        # The robot's floor: the lowest RMS among the floors whose held-out likelihood is not
-        # below the best floor's by more than two paired standard errors.
+        # The robot's floor: the best held-out likelihood among the floors whose online RMS
+        # is not above the best floor's by more than two paired standard errors.
         assert np.allclose(cal['controlled_rms']['mean_by_scale'], ctrl.mean(axis=2),
                            rtol=1e-10)
         for a in range(3):
-            top = np.argmax(ll[:, a].mean(axis=1))
-            allowed = [b for b in range(2) if (ll[top, a] - ll[b, a]).mean()
-                       <= 2 * (ll[top, a] - ll[b, a]).std(ddof=1) / np.sqrt(len(demos))]
-            b = min(allowed, key=lambda b: ctrl[b, a].mean())
+            low = np.argmin(ctrl[:, a].mean(axis=1))
+            allowed = [b for b in range(2) if (ctrl[b, a] - ctrl[low, a]).mean()
+                       <= 2 * (ctrl[b, a] - ctrl[low, a]).std(ddof=1) / np.sqrt(len(demos))]
+            b = max(allowed, key=lambda b: ll[b, a].mean())
             assert cal['controlled_rms']['prior_scale'][a] == scales[b]
             assert np.allclose(cal['controlled_rms']['scores'][a], ctrl[b, a], rtol=1e-10)
     assert np.allclose(cal['completion']['mean_by_scale'], density.mean(axis=2), rtol=1e-10)
@@ -151,6 +151,27 @@ def test_batched_final_rms_equals_controlled_rms(noise):
     view = _final_views(model.basis_, demos)
     got = _final_rms(model, view, np.arange(6))
     assert np.allclose(got, [controlled_rms(model, d, 'final') for d in demos[:6]], rtol=1e-9)
+
+
+def test_online_rms_is_the_estimators_prediction_of_the_rest():
+    """online_rms: the estimator fed the decimated samples up to each fraction (absorbed in one
+    go, an order the recursive form does not depend on), its MAP component's expected path of
+    the controlled agent over the rest; RMS over samples and DOFs, mean over the fractions."""
+    from mixture_ip_ros.app.evaluation.common import decimated_rows
+    from mixture_ip_ros.core.online import OnlineEstimator
+    demos = mixture_demos(seed=3, n_obs=2, n_ctrl=2, counts=(8, 9, 7))[0]
+    model = MixtureIProMP(3, n_basis=8, speed_weight=0.2).fit(demos[3:])
+    for demo in demos[:3]:
+        rows = decimated_rows(demo.t, 0.05)
+        want = []
+        for f in (0.3, 0.5, 0.7):
+            est = OnlineEstimator(model)
+            for r in rows[demo.t[rows] <= f * demo.duration]:
+                est.absorb(float(demo.t[r]), demo.observed[r])
+            rest = demo.t > f * demo.duration
+            pred = est.expected_controlled(demo.t[rest])[1]
+            want.append(np.sqrt(np.mean((pred - demo.controlled[rest]) ** 2)))
+        assert online_rms(model, demo) == pytest.approx(np.mean(want), rel=1e-9)
 
 
 def test_completion_and_heldout_loglik_on_ten_sampled_sets_of_three_patterns():

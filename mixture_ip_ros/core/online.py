@@ -569,3 +569,25 @@ def speed_log_scores(model, demonstrations, weights=SPEED_WEIGHTS, fractions=SPE
                                           1.0 / demo.duration) for w in weights]
             n += 1
     return total, n
+
+
+def prefix_predictions(model, demo, fractions, n_alpha: int = 50, min_interval: float = 0.05):
+    """What the estimator node makes of ``demo`` from its beginning, the phase unknown: one
+    OnlineEstimator fed the observed agent sample by sample and, after the first f T of the
+    movement for each of the increasing ``fractions``, (the MAP component k*, the controlled
+    agent's expected path under it (:meth:`OnlineEstimator.expected_controlled`) at the samples
+    after f T where it was recorded (m, Q), or None where there are none, their rows)."""
+    est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval)
+    rows = np.flatnonzero(~np.isnan(demo.observed).any(axis=1))
+    recorded = ~np.isnan(demo.controlled).any(axis=1)
+    out, j = [], 0
+    for f in fractions:
+        t_f = f * demo.duration + 1e-9
+        while j < len(rows) and demo.t[rows[j]] <= t_f + 1e-9:
+            est.update(float(demo.t[rows[j]]), demo.observed[rows[j]])
+            j += 1
+        rest = np.flatnonzero((demo.t > t_f) & recorded)
+        k = est.map_hypothesis()[0]
+        pred = est.expected_controlled(demo.t[rest], component=k)[1] if rest.size else None
+        out.append((int(k), pred, rest))
+    return out

@@ -30,19 +30,24 @@ Numbers are means over the held-out recordings of all folds (ARIs: over the fold
 
 from __future__ import annotations
 
+from concurrent.futures import ProcessPoolExecutor
+from functools import partial
+from multiprocessing import get_context
+import os
 from pathlib import Path
 import time
 
 import numpy as np
 
 from mixture_ip_ros.app.evaluation.baselines import NearestNeighbour, clustering_baselines
-from mixture_ip_ros.app.evaluation.common import (EvalConfig, feed_until, majority_labels,
+from mixture_ip_ros.app.evaluation.common import (EvalConfig, majority_labels,
                                                   phase_known_components, trained)
-from mixture_ip_ros.core.online import OnlineEstimator
+from mixture_ip_ros.core.online import prefix_predictions
 from mixture_ip_ros.viz import plots
 
 FRACTIONS = (0.3, 0.5, 0.7, 1.0)
 N_FOLDS = 5
+METHODS = ('mixture', 'single', 'supervised', 'true_k', 'nearest', 'phase_known')
 
 
 def interactions_config(quick: bool = False) -> EvalConfig:
@@ -69,34 +74,104 @@ def _ari(a, b) -> float:
     return float(adjusted_rand_score(a, b))
 
 
-class _Online:
-    """A model's OnlineEstimator fed one recording's observed agent fraction by fraction."""
-
-    def __init__(self, model, config: EvalConfig):
-        self.model = model
-        self.config = config
-
-    def run(self, demo, fractions):
-        """Per fraction (component, predicted controlled agent at the samples after the prefix
-        (m, Q) or None, their rows)."""
-        est = OnlineEstimator(self.model, n_alpha=self.config.n_alpha,
-                              min_interval=self.config.min_interval)
-        rows = np.flatnonzero(~np.isnan(demo.observed).any(axis=1))
-        out, j = [], 0
-        for f in fractions:
-            t_f = f * demo.duration + 1e-9
-            j = feed_until(est, demo, rows, j, t_f)
-            rest = np.flatnonzero((demo.t > t_f) & ~np.isnan(demo.controlled).any(axis=1))
-            k = est.map_hypothesis()[0]
-            pred = est.expected_controlled(demo.t[rest], component=k)[1] if rest.size else None
-            out.append((int(k), pred, rest))
-        return out
-
-
 def _errors(pred, truth):
     """(RMS over the samples, error at the last one), metres."""
     d = np.linalg.norm(pred - truth, axis=1)
     return float(np.sqrt(np.mean(d ** 2))), float(d[-1])
+
+
+def _fold(demos, labels, fold, config: EvalConfig, seed: int, f: int) -> dict:
+    """Fold ``f`` of :func:`evaluate_labelled`: the models trained on the other folds, every
+    method's results on this fold's recordings (their rows), the fold's summary, the mixture's
+    prediction at half the movement of the first recording of each interaction, timings."""
+    classes = sorted(set(labels.tolist()), key=str)
+    has_partner = demos[0].n_controlled_dofs > 0
+    fractions = tuple(float(x) for x in config.fractions)
+    train_i, test_i = np.flatnonzero(fold != f), np.flatnonzero(fold == f)
+    train = [demos[i] for i in train_i]
+    shape = (len(test_i), len(fractions))
+    right = {m: np.zeros(shape, dtype=bool) for m in METHODS}
+    rms = {m: np.full(shape, np.nan) for m in METHODS}
+    final = {m: np.full(shape, np.nan) for m in METHODS}
+    examples, timings = {}, {}
+    t0 = time.perf_counter()
+    model, info = trained(train, config, random_state=seed)
+    single, _ = trained(train, config, n_components=1)
+    supervised, _ = trained(train, config, labels=labels[train_i])
+    # Training with K given fits what training with K chosen fits once it chose that K.
+    true_k = (model if info['n_components'] == len(classes) else
+              trained(train, config, n_components=len(classes), random_state=seed)[0])
+    timings['training_s'] = time.perf_counter() - t0
+    names = majority_labels(model, train)
+    comp_train = np.argmax(model.resp_, axis=1)
+    heldout = [int(np.argmax(model.component_posterior(
+        demos[i].phase[ok], demos[i].observed[ok], alpha=1.0 / demos[i].duration)))
+        for i in test_i for ok in [~np.isnan(demos[i].observed).any(axis=1)]]
+    t0 = time.perf_counter()
+    namers = {'mixture': (model, names), 'single': (single, majority_labels(single, train)),
+              'supervised': (supervised, list(supervised.classes_)),
+              'true_k': (true_k, majority_labels(true_k, train))}
+    for r, i in enumerate(test_i):
+        right['phase_known'][r] = [names[k] == labels[i] for k in phase_known_components(
+            model, demos[i], fractions, config.min_interval)]
+    for m, (mod, nm) in namers.items():
+        for r, i in enumerate(test_i):
+            for c, (k, pred, rest) in enumerate(prefix_predictions(
+                    mod, demos[i], fractions, config.n_alpha, config.min_interval)):
+                right[m][r, c] = nm[k] == labels[i]
+                if pred is not None and has_partner:
+                    rms[m][r, c], final[m][r, c] = _errors(pred, demos[i].controlled[rest])
+                    if m == 'mixture' and abs(fractions[c] - 0.5) < 1e-9:
+                        examples.setdefault(labels[i], (i, rest, pred, nm[k]))
+    timings['online_s'] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    clustering = clustering_baselines(train, labels[train_i], len(classes),
+                                      seeds=range(seed, seed + 5))
+    nn = NearestNeighbour(config.min_interval).fit(train, labels[train_i])
+    for r, i in enumerate(test_i):
+        d = demos[i]
+        for c, (j, scale) in enumerate(nn.matches(d, fractions)):
+            rest = np.flatnonzero((d.t > fractions[c] * d.duration + 1e-9)
+                                  & ~np.isnan(d.controlled).any(axis=1))
+            label, pred = nn.predict(j, scale, d.t[rest])
+            right['nearest'][r, c] = label == labels[i]
+            if rest.size and has_partner:
+                rms['nearest'][r, c], final['nearest'][r, c] = _errors(pred, d.controlled[rest])
+    timings['baselines_s'] = time.perf_counter() - t0
+    summary = {'n_components': int(info['n_components']),
+               'prior_scale': info['prior_scale'],
+               'clear_optimum': bool(info['selection']['clear_optimum']),
+               'speed_weight': info['speed_weight'],
+               'curve': info['selection']['mean'],
+               'ari': _ari(labels[train_i], comp_train),
+               'heldout_ari': _ari(labels[test_i], heldout),
+               'component_labels': names,
+               'baseline_kmeans_ari': clustering['kmeans'],
+               'baseline_gmm_pca_ari': clustering['gmm_pca']}
+    return {'rows': test_i, 'right': right, 'rms': rms, 'final': final, 'fold': summary,
+            'examples': examples, 'timings': timings}
+
+
+def _fold_tasks(demos, config: EvalConfig, seed: int) -> list:
+    """The folds of :func:`evaluate_labelled` as independent tasks (checked first)."""
+    labels = np.array([d.label for d in demos])
+    if any(lbl is None for lbl in labels):
+        raise ValueError('the evaluation needs a label for every recording')
+    classes = sorted(set(labels.tolist()), key=str)
+    if len(classes) < 2 or min(np.sum(labels == c) for c in classes) < N_FOLDS:
+        raise ValueError(f'{N_FOLDS}-fold cross-validation needs at least {N_FOLDS} recordings '
+                         f'of each of at least 2 labels, got {len(demos)} of {len(classes)}')
+    fold = stratified_folds(labels, N_FOLDS, seed)
+    return [partial(_fold, demos, labels, fold, config, seed, f) for f in range(N_FOLDS)]
+
+
+def _run(tasks) -> list:
+    """The tasks' results in order, one process per core (fork shares the recordings)."""
+    workers = min(len(tasks), len(os.sched_getaffinity(0)))
+    if workers <= 1:
+        return [task() for task in tasks]
+    with ProcessPoolExecutor(workers, mp_context=get_context('fork')) as pool:
+        return [job.result() for job in [pool.submit(task) for task in tasks]]
 
 
 def evaluate_labelled(demos, out_dir: Path, config: EvalConfig = None, name: str = 'recordings',
@@ -107,87 +182,37 @@ def evaluate_labelled(demos, out_dir: Path, config: EvalConfig = None, name: str
     metres), else in the DOFs' own unit."""
     config = config or interactions_config()
     demos = list(demos)
+    return _metrics(demos, _run(_fold_tasks(demos, config, seed)), out_dir, config, name, cm)
+
+
+def _metrics(demos, results, out_dir: Path, config: EvalConfig, name: str, cm: bool) -> dict:
+    """:func:`evaluate_labelled`'s metrics and plots from its folds' results."""
     labels = np.array([d.label for d in demos])
-    if any(lbl is None for lbl in labels):
-        raise ValueError('the evaluation needs a label for every recording')
     classes = sorted(set(labels.tolist()), key=str)
-    if len(classes) < 2 or min(np.sum(labels == c) for c in classes) < N_FOLDS:
-        raise ValueError(f'{N_FOLDS}-fold cross-validation needs at least {N_FOLDS} recordings '
-                         f'of each of at least 2 labels, got {len(demos)} of {len(classes)}')
     has_partner = demos[0].n_controlled_dofs > 0
     unit = 100.0 if cm else 1.0
     fractions = tuple(float(f) for f in config.fractions)
     keys = [f'{f:g}' for f in fractions]
-    fold = stratified_folds(labels, N_FOLDS, seed)
-    methods = ('mixture', 'single', 'supervised', 'true_k', 'nearest', 'phase_known')
-    right = {m: np.zeros((len(demos), len(fractions)), dtype=bool) for m in methods}
-    rms = {m: np.full((len(demos), len(fractions)), np.nan) for m in methods}
-    final = {m: np.full((len(demos), len(fractions)), np.nan) for m in methods}
-    per_fold = []
-    examples = {}
+    right = {m: np.zeros((len(demos), len(fractions)), dtype=bool) for m in METHODS}
+    rms = {m: np.full((len(demos), len(fractions)), np.nan) for m in METHODS}
+    final = {m: np.full((len(demos), len(fractions)), np.nan) for m in METHODS}
+    per_fold, examples = [], {}
     timings = {'training_s': 0.0, 'online_s': 0.0, 'baselines_s': 0.0}
-    for f in range(N_FOLDS):
-        train_i, test_i = np.flatnonzero(fold != f), np.flatnonzero(fold == f)
-        train = [demos[i] for i in train_i]
-        t0 = time.perf_counter()
-        model, info = trained(train, config, random_state=seed)
-        single, _ = trained(train, config, n_components=1)
-        supervised, _ = trained(train, config, labels=labels[train_i])
-        true_k, _ = trained(train, config, n_components=len(classes), random_state=seed)
-        timings['training_s'] += time.perf_counter() - t0
-        names = majority_labels(model, train)
-        comp_train = np.argmax(model.resp_, axis=1)
-        heldout = [int(np.argmax(model.component_posterior(
-            demos[i].phase[ok], demos[i].observed[ok], alpha=1.0 / demos[i].duration)))
-            for i in test_i for ok in [~np.isnan(demos[i].observed).any(axis=1)]]
-        t0 = time.perf_counter()
-        namers = {'mixture': (model, names), 'single': (single, majority_labels(single, train)),
-                  'supervised': (supervised, list(supervised.classes_)),
-                  'true_k': (true_k, majority_labels(true_k, train))}
-        for i in test_i:
-            right['phase_known'][i] = [names[k] == labels[i] for k in phase_known_components(
-                model, demos[i], fractions, config.min_interval)]
-        for m, (mod, nm) in namers.items():
-            online = _Online(mod, config)
-            for i in test_i:
-                for c, (k, pred, rest) in enumerate(online.run(demos[i], fractions)):
-                    right[m][i, c] = nm[k] == labels[i]
-                    if pred is not None and has_partner:
-                        rms[m][i, c], final[m][i, c] = _errors(pred, demos[i].controlled[rest])
-                        if m == 'mixture' and abs(fractions[c] - 0.5) < 1e-9:
-                            examples.setdefault(labels[i], (demos[i], rest, pred, nm[k]))
-        timings['online_s'] += time.perf_counter() - t0
-        t0 = time.perf_counter()
-        clustering = clustering_baselines(train, labels[train_i], len(classes),
-                                          seeds=range(seed, seed + 5))
-        nn = NearestNeighbour(config.min_interval).fit(train, labels[train_i])
-        for i in test_i:
-            d = demos[i]
-            for c, (j, scale) in enumerate(nn.matches(d, fractions)):
-                rest = np.flatnonzero((d.t > fractions[c] * d.duration + 1e-9)
-                                      & ~np.isnan(d.controlled).any(axis=1))
-                label, pred = nn.predict(j, scale, d.t[rest])
-                right['nearest'][i, c] = label == labels[i]
-                if rest.size and has_partner:
-                    rms['nearest'][i, c], final['nearest'][i, c] = _errors(pred,
-                                                                           d.controlled[rest])
-        timings['baselines_s'] += time.perf_counter() - t0
-        per_fold.append({'n_components': int(info['n_components']),
-                         'prior_scale': info['prior_scale'],
-                         'clear_optimum': bool(info['selection']['clear_optimum']),
-                         'speed_weight': info['speed_weight'],
-                         'curve': info['selection']['mean'],
-                         'ari': _ari(labels[train_i], comp_train),
-                         'heldout_ari': _ari(labels[test_i], heldout),
-                         'component_labels': names,
-                         'baseline_kmeans_ari': clustering['kmeans'],
-                         'baseline_gmm_pca_ari': clustering['gmm_pca']})
+    for r in results:
+        for m in METHODS:
+            right[m][r['rows']], rms[m][r['rows']] = r['right'][m], r['rms'][m]
+            final[m][r['rows']] = r['final'][m]
+        per_fold.append(r['fold'])
+        for lbl, (i, rest, pred, named) in r['examples'].items():
+            examples.setdefault(lbl, (demos[i], rest, pred, named))
+        for key in timings:
+            timings[key] += r['timings'][key]
 
     def by_fraction(values, scale=1.0):
         return {k: (None if np.all(np.isnan(values[:, c])) else
                     float(scale * np.nanmean(values[:, c]))) for c, k in enumerate(keys)}
     accuracy = {m: {k: float(right[m][:, c].mean()) for c, k in enumerate(keys)}
-                for m in methods}
+                for m in METHODS}
     metrics = {
         'n_recordings': len(demos), 'interactions': classes, 'n_folds': N_FOLDS,
         'n_components_selected': [p['n_components'] for p in per_fold],
@@ -261,9 +286,16 @@ def evaluate_nuisi(out_dir: Path, config: EvalConfig = None, seed: int = 0,
     """NuiSI v1 and v2 (scenarios.nuisi): every recording of both upstream splits, person 1's
     hand observed, person 2's controlled. {version: metrics} plus the source."""
     from mixture_ip_ros.scenarios import nuisi
+    config = config or interactions_config()
+    sets = {v: nuisi.demonstrations(v, 'train') + nuisi.demonstrations(v, 'test')
+            for v in versions}
+    # Every version's folds in one pool, the version with more samples first (its folds take
+    # longest), so that the cores stay busy to the end.
+    order = sorted(versions, key=lambda v: -sum(len(d.t) for d in sets[v]))
+    results = _run([t for v in order for t in _fold_tasks(sets[v], config, seed)])
     out = {}
-    for v in versions:
-        demos = nuisi.demonstrations(v, 'train') + nuisi.demonstrations(v, 'test')
+    for g, v in enumerate(order):
         out[v] = {'source': nuisi.SOURCE.format(version=v, commit=nuisi.VERSIONS[v].commit),
-                  **evaluate_labelled(demos, out_dir, config, name=f'nuisi_{v}', seed=seed)}
-    return out
+                  **_metrics(sets[v], results[g * N_FOLDS:(g + 1) * N_FOLDS], out_dir, config,
+                             f'nuisi_{v}', cm=True)}
+    return {v: out[v] for v in versions}
