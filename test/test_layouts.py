@@ -33,7 +33,10 @@ def _layout(P, Q):
 
 @pytest.mark.parametrize('P, Q', [(1, 0), (2, 0), (1, 2), (4, 1), (3, 7)])
 def test_layout_trains_saves_loads_and_recognises_online(tmp_path, P, Q):
-    demos, labels, _, _ = mixture_demos(seed=4, n_obs=P, n_ctrl=Q)
+    # Seed 9: in every layout K = 3 beats 2 by at least 6 paired standard errors and K = 4 is
+    # at most 0.8 above 3, off the selection rule's edge (one standard error). Seed 4's (4, 1)
+    # set had K = 4 at 1.02 above 3, so the machine's BLAS kernels decided its K.
+    demos, labels, _, _ = mixture_demos(seed=9, n_obs=P, n_ctrl=Q)
     layout = _layout(P, Q)
     model, info = train_to_file(demos, tmp_path / 'm.npz', layout=layout, candidates=(1, 2, 3, 4),
                                 n_basis=8)
