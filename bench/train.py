@@ -87,14 +87,14 @@ def plain_heldout(demos, candidates, fractions=(), prior_scales=(), n_folds=5, p
     for name, scores in S.items():
         mean = scores.mean(axis=2)
         if name == 'controlled_rms':
-            # the best log-likelihood among the floors whose online RMS is within two paired
-            # standard errors of the best floor's
+            # the best log-likelihood among the floors whose online RMS is within one paired
+            # standard error of the best floor's
             best = []
             for a in range(len(candidates)):
                 rms = scores[:, a]
                 low = rms[np.argmin(rms.mean(axis=1))]
                 allowed = [b for b in range(len(scales)) if (rms[b] - low).mean()
-                           <= 2 * (rms[b] - low).std(ddof=1) / np.sqrt(len(demos))]
+                           <= (rms[b] - low).std(ddof=1) / np.sqrt(len(demos))]
                 best.append(max(allowed, key=lambda b: S['loglik'][b, a].mean()))
             best = np.array(best)
         else:
