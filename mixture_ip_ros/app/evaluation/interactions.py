@@ -166,7 +166,9 @@ def _fold_tasks(demos, config: EvalConfig, seed: int) -> list:
 
 
 def _run(tasks) -> list:
-    """The tasks' results in order, one process per core (fork shares the recordings)."""
+    """The tasks' results in order, one process per core. Each task is pickled to its worker
+    with its recordings; fork spares the workers importing the package and compiling the
+    estimator's kernels again."""
     workers = min(len(tasks), len(os.sched_getaffinity(0)))
     if workers <= 1:
         return [task() for task in tasks]
