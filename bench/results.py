@@ -43,6 +43,9 @@ def jobs():
                       str(OUT / f'{name}.json')], OUT / f'{name}.json')
     out['interactions'] = ([sys.executable, str(ROOT / 'bench' / 'interactions.py'), '--robots',
                             'iiwa14', '--out', str(OUT / 'interactions')], None)
+    out['robustness'] = ([sys.executable, str(ROOT / 'bench' / 'robustness.py'), '--out',
+                          str(OUT / 'robustness')], None)
+    out['cpu_kernels'] = ([sys.executable, str(ROOT / 'bench' / 'cpu_kernels.py')], None)
     out['train'] = ([sys.executable, str(ROOT / 'bench' / 'train.py')], None)
     out['estimator'] = ([sys.executable, str(ROOT / 'bench' / 'estimator.py')], None)
     out['sim'] = ([sys.executable, str(ROOT / 'bench' / 'sim.py')], None)
@@ -89,6 +92,58 @@ def fractions(d, keys=('0.3', '0.5', '0.7', '1')):
 
 def cm(d, keys=('0.3', '0.5', '0.7')):
     return ' / '.join('-' if d.get(k) is None else f'{d[k]:.1f}' for k in keys)
+
+
+ROBUSTNESS_ROWS = (
+    ('clean', 'as recorded'), ('clean_shared', 'as recorded, `--translation shared`'),
+    ('offset', 'pair elsewhere (a)'), ('offset_none', 'pair elsewhere, `--translation none`'),
+    ('noise', 'tracker noise (b)'), ('clock', 'tracker clock (c)'),
+    ('half', 'half the training recordings (d)'), ('all', '(a) + (b) + (c)'),
+    ('all_none', '(a) + (b) + (c), `--translation none`'), ('all_half', '(a) + (b) + (c) + (d)'))
+
+
+def robustness_section(rob, kernels) -> list:
+    """The robustness table (bench/robustness.py) and the kernels' decisions
+    (bench/cpu_kernels.py)."""
+    L = []
+    if rob:
+        m = rob['magnitudes']
+        L += ['## Recorded as another lab would: NuiSI corrupted (`bench/robustness.py`)', '',
+              f"Seed {rob['seed']}. (a) each recording's pair elsewhere: one offset for both "
+              f"people, std {' / '.join(f'{100 * x:.0f}' for x in m['offset_std'])} cm per axis; "
+              f"(b) a tracker's noise on every coordinate, {100 * m['noise_std']:.0f} cm "
+              f"correlated over {m['noise_time']:g} s; (c) stamps jittered by "
+              f"{1000 * m['jitter_std']:.0f} ms, {100 * m['drop']:.0f} % of the frames dropped "
+              f"in bursts of 1-{m['burst']}; (d) each fold trained on "
+              f"{100 * m['train_fraction']:.0f} % of its training recordings. Shifted data are "
+              "trained with `--translation shared` unless the row says otherwise; the "
+              "nearest-neighbour baseline is given the same knowledge (derivative DTW). "
+              'Recognition at 30 / 50 / 70 / 100 %, partner RMS in cm at 30 / 50 / 70 %.', '']
+        for v in ('v1', 'v2'):
+            if v not in rob:
+                continue
+            L += [f'NuiSI {v}:', '', '| data | K per fold | ARI (k-means) | recognised | '
+                  'supervised | 1-NN DTW | partner (x clean at 50 %) | nearest neighbour |',
+                  '|---|---|---|---|---|---|---|---|']
+            for case, name in ROBUSTNESS_ROWS:
+                c = rob[v].get(case)
+                if not c:
+                    continue
+                ratio = (c.get('partner_vs_clean') or {}).get('0.5')
+                L.append(f"| {name} | {', '.join(map(str, c['k']))} | {c['ari']:.2f} "
+                         f"({c['kmeans_ari']:.2f}) | {fractions(c['recognised'])} % | "
+                         f"{fractions(c['supervised'])} % | {fractions(c['nn_dtw'])} % | "
+                         f"{cm(c['partner_cm'])} ({'-' if ratio is None else f'{ratio:.2f}'}) | "
+                         f"{cm(c['nn_partner_cm'])} |")
+            L.append('')
+    if kernels:
+        same = 'the same' if kernels['same'] else 'NOT the same'
+        L += ['## The same decisions on every CPU (`bench/cpu_kernels.py`)', '',
+              f"Training's decisions (K, partition, floor, speed weight) on the layouts test's "
+              f"sets under the OpenBLAS kernels {', '.join(kernels['kernels'])}: {same}; the "
+              f"curves behind them differ by {kernels['curve_max_relative_difference']:.1e} "
+              'relative at most.', '']
+    return L
 
 
 def page(R: dict) -> str:
@@ -184,6 +239,7 @@ def page(R: dict) -> str:
                 ('speed weight per fold (training calibrates it)',
                  lambda m: ', '.join(f"{p['speed_weight']:g}" for p in m['folds']))]
         L += [f'| {name} | {f(v1)} | {f(v2)} |' for name, f in rows] + ['']
+    L += robustness_section(R.get('robustness'), R.get('cpu_kernels'))
     demos = [(r, R.get(f'demo_{r}')) for r in ROBOTS]
     if any(d for _, d in demos):
         L += ['## Closed loop (`mixture-ip demo`, box assembly, the real nodes on simulated '

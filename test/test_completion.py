@@ -106,11 +106,12 @@ def test_completion_curves_equal_the_straightforward_loop(n_ctrl):
     assert set(cal) == {'loglik', 'completion', 'completion_rms'} | (
         {'controlled_rms'} if n_ctrl else set())
     fold = cv_folds(len(demos), 5, 0)
+    smoothing = MixtureIProMP(1, n_basis=8).prepare(demos).smoothing     # the set's, shared
     density, rms, ctrl, ll = (np.empty((2, 3, len(demos))) for _ in range(4))
     for b, scale in enumerate(scales):
         for a, K in enumerate(candidates):
             for f in range(5):
-                model = MixtureIProMP(K, n_basis=8, prior_scale=scale).fit(
+                model = MixtureIProMP(K, n_basis=8, prior_scale=scale, smoothing=smoothing).fit(
                     [d for d, g in zip(demos, fold) if g != f])
                 test = np.flatnonzero(fold == f)
                 dd, rr = score_completion(model, [demos[i] for i in test], (0.3, 0.6))
@@ -189,6 +190,7 @@ def test_completion_and_heldout_loglik_on_ten_sampled_sets_of_three_patterns():
     assert right['loglik'] == 10 and right['completion'] in (8, 9)
 
 
+@pytest.mark.decision
 def test_completion_keeps_one_sampled_component():
     demos = mixture_demos(seed=6, counts=(30,), durations=((1.0, 1.6),), n_ctrl=0)[0]
     cal = calibrated_heldout_curves(demos, [1, 2, 3], n_basis=8)

@@ -72,9 +72,12 @@ def test_mixture_em_is_monotone_and_matches_direct_log_likelihood(three_patterns
         assert np.all(np.diff(ll) >= -1e-9 * np.abs(ll[:-1])), method
     # Direct evaluation of eq. 6 (plus the covariance priors) at the fitted parameters.
     m = MixtureIProMP(3, n_basis=8, tol=1e-9).fit(demos)
+    # Eq. 14 with the fitted curvature penalty per DOF (core.promp.penalised_weights).
+    curvature = np.diff(np.eye(8), 2, axis=0)
     W = np.array([np.concatenate([np.linalg.solve(
-        m.basis_(d.t / d.duration).T @ m.basis_(d.t / d.duration) + 1e-6 * np.eye(8),
-        m.basis_(d.t / d.duration).T @ y) for y in np.hstack([d.observed, d.controlled]).T])
+        m.basis_(d.t / d.duration).T @ m.basis_(d.t / d.duration)
+        + lam * curvature.T @ curvature + 1e-6 * np.eye(8), m.basis_(d.t / d.duration).T @ y)
+        for lam, y in zip(m.smoothing_, np.hstack([d.observed, d.controlled]).T)])
         for d in demos])
     # Each component is joint over shape and phase speed: p(w | k) p(alpha | k).
     alpha = np.array([1 / d.duration for d in demos])

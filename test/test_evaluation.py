@@ -44,6 +44,7 @@ def box_from_bags(tmp_path_factory):
     return out, metrics
 
 
+@pytest.mark.decision
 def test_box_assembly_finds_three_patterns_and_meets_selection_aims(box_from_bags):
     _, m = box_from_bags
     assert m['n_demonstrations'] == 48 and m['n_folds'] == 16
@@ -106,6 +107,7 @@ def test_missing_data_em_beats_regression_and_loglik_rises(tmp_path):
     assert_real_pngs(tmp_path, m['plots'])
 
 
+@pytest.mark.decision
 def test_phase_estimation_finds_alpha_by_40_percent(tmp_path):
     m = evaluate('phase', tmp_path, quick=True)
     # Thesis 4.3.1: after 40 % the best alpha of 50 samples is found.
@@ -117,6 +119,7 @@ def test_phase_estimation_finds_alpha_by_40_percent(tmp_path):
     assert_real_pngs(tmp_path, m['plots'])
 
 
+@pytest.mark.decision
 def test_pole_mixture_goes_around_the_pole(tmp_path):
     m = evaluate('pole', tmp_path, quick=True)
     # Thesis Fig. 7: one Gaussian averages the two sides through the pole; the mixture does not.
@@ -129,6 +132,7 @@ def test_pole_mixture_goes_around_the_pole(tmp_path):
     assert_real_pngs(tmp_path, m['plots'])
 
 
+@pytest.mark.decision
 def test_box_assembly_of_another_arm_uses_its_joints_and_kinematics(tmp_path):
     """UR5 bags (6 joints): read with its joint names, the hand error from its forward
     kinematics, the same aims as the iiwa's; the iiwa's bags are refused for the UR5 whole."""

@@ -29,6 +29,7 @@ def quick_gestures(tmp_path_factory):
     return out, evaluate('gestures', out, quick=True)
 
 
+@pytest.mark.decision
 def test_gesture_evaluation_reports_every_method_on_the_same_split(quick_gestures):
     out, m = quick_gestures
     assert all(k in m for k in KEYS)

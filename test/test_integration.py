@@ -119,6 +119,7 @@ def _kept_its_promises(r, reference, kinematics):
     assert e['non_finite_commands'] == 0, r.name
 
 
+@pytest.mark.decision
 def test_three_held_out_interactions_in_process(loop, setup, reference):
     records = [reference[name] for name in setup['held']]
     assert sorted(r.true_pattern for r in records) == ['plate', 'screw', 'screwdriver']
@@ -388,6 +389,7 @@ def ur5_setup(tmp_path_factory):
     return {'data': data, 'labels': labels, 'held': held, 'model': model, 'targets': targets}
 
 
+@pytest.mark.decision
 def test_the_closed_loop_with_the_ur5(loops, ur5_setup):
     from mixture_ip_ros.app.closed_loop import ClosedLoop
     loops.close()

@@ -64,3 +64,29 @@ def test_a_layer_imports_only_itself_and_lower_layers(layer):
                 wrong.append(f'{path.relative_to(PACKAGE)} imports ROS client {name}')
     assert not wrong, '\n'.join(wrong)
 
+
+
+def test_no_module_imports_itself_through_others():
+    """No import circle between the package's modules (function-level imports included): each
+    concept has one home that the others depend on, not a pair leaning on each other."""
+    modules = {}
+    for path, _ in _modules():
+        rel = path.relative_to(PACKAGE).with_suffix('')
+        name = '.'.join(('mixture_ip_ros',) + rel.parts)
+        modules[name.removesuffix('.__init__')] = path
+    graph = {name: {m for m in _imports(path) if m in modules and m != name}
+             for name, path in modules.items()}
+    circles, done = [], set()
+
+    def visit(name, stack):
+        if name in stack:
+            circles.append(stack[stack.index(name):] + [name])
+            return
+        if name in done:
+            return
+        for other in sorted(graph[name]):
+            visit(other, stack + [name])
+        done.add(name)
+    for name in sorted(graph):
+        visit(name, [])
+    assert not circles, '\n'.join(' -> '.join(c) for c in circles)

@@ -142,6 +142,7 @@ def test_an_outlier_does_not_decide_the_number_of_patterns():
     assert robust_gain.mean() > 0.5
 
 
+@pytest.mark.decision
 def test_one_atypical_demonstration_does_not_take_a_component_of_its_own():
     """Two close patterns, a far one and one atypical member of the far one. Under normal
     components the highest likelihood puts the atypical one alone and merges the close two
@@ -163,6 +164,7 @@ def test_one_atypical_demonstration_does_not_take_a_component_of_its_own():
         PatternMixture(2, min_members=0).fit(X)
 
 
+@pytest.mark.decision
 def test_real_interactions_are_found_in_the_path_metric():
     """NuiSI v2 (four interactions of two people, where the user cache has it): the mixture's
     start finds the interactions (k-means of the standardised weights, the start before the
@@ -180,6 +182,7 @@ def test_real_interactions_are_found_in_the_path_metric():
         assert adjusted_rand_score(labels, found) == 1.0, seed
 
 
+@pytest.mark.decision
 def test_the_number_of_real_interactions_is_chosen():
     """NuiSI v2 (where the user cache has it): training chooses the four interactions, and
     its components are they. With t components three patterns (the two fist-bumps merged) are
@@ -200,6 +203,7 @@ def test_the_number_of_real_interactions_is_chosen():
     assert adjusted_rand_score([d.label for d in demos], np.argmax(model.resp_, axis=1)) == 1.0
 
 
+@pytest.mark.decision
 def test_sampled_patterns_are_found_and_their_number_chosen():
     from mixture_ip_ros.app.training import train
     from sklearn.metrics import adjusted_rand_score
@@ -232,6 +236,7 @@ def test_a_partition_the_data_hold_is_reproducible_and_an_arbitrary_one_is_not()
     assert S[1].mean() < 0.8 and S[3].mean() < 0.95
 
 
+@pytest.mark.decision
 def test_the_plateau_keeps_the_smallest_k_whose_partition_is_as_reproducible():
     """Held-out scores that cannot tell K = 2..4 apart: by default the smallest; with a second
     criterion, its choice among those three only."""

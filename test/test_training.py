@@ -4,6 +4,7 @@ calibrated for the chosen K, the final fit with the method asked for, and its pr
 import io
 
 import numpy as np
+import pytest
 
 from mixture_ip_ros.core.basis import GaussianBasis
 from mixture_ip_ros.core.demonstration import Demonstration
@@ -12,6 +13,7 @@ from mixture_ip_ros.app.training import text_progress, train
 from mixture_ip_ros.scenarios.synthetic import mixture_demos, random_spd
 
 
+@pytest.mark.decision
 def test_em_training_chooses_k_on_regression_fits_and_fits_the_model_by_em():
     demos, labels, _, _ = mixture_demos(seed=0)
     gappy = []
@@ -57,6 +59,7 @@ def test_leave_one_out_floor_is_the_one_its_own_criterion_prefers():
         len(loo['candidates']) - n_train)
 
 
+@pytest.mark.decision
 def test_the_pattern_criterion_model_takes_the_floor_calibrated_for_its_k():
     """K by the pattern space, then the robot's floor of that K on the held-out folds (as
     calibrated_heldout_curves picks it), and the model fitted there."""

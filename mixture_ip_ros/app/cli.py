@@ -6,6 +6,7 @@ import logging
 import math
 import os
 import sys
+from functools import partial
 from pathlib import Path
 
 from mixture_ip_ros.nodes.launch import set_process_defaults
@@ -26,6 +27,13 @@ def _bounded(kind, low=None, high=None, name='a number'):
             raise argparse.ArgumentTypeError(f'{value} is not {bounds}')
         return value
     return parse
+
+
+def _noise_stds(text):
+    """'0.01' -> 0.01, '0.01,0.02' -> [0.01, 0.02]: standard deviations, finite and >= 0."""
+    one = _bounded(float, 0.0)
+    values = [one(v) for v in text.split(',')]
+    return values[0] if len(values) == 1 else values
 
 
 def _existing_dir(text):
@@ -72,22 +80,18 @@ def _train(args):
     from mixture_ip_ros.app.training import text_progress, train_to_file
     from mixture_ip_ros.robot.description import load_description
     robot = load_description(args.robot)
-    if (args.bag_dir is None) == (args.csv is None):
-        raise ValueError('give a folder of bags or --csv DIR (one of them)')
     kwargs = {'n_basis': args.n_basis, 'method': args.method, 'criterion': args.criterion,
               'noise': args.noise}
     if args.observation_noise is not None:
-        kwargs['observation_noise'] = _floats(args.observation_noise, '--observation-noise')
+        kwargs['observation_noise'] = args.observation_noise
     if args.csv is not None:
         from mixture_ip_ros.io.csv_files import load_csv_dataset
         layout = _csv_layout(args)
         demos = load_csv_dataset(args.csv, layout, time=args.time)
         kwargs['observed_frame'] = args.frame or ''
+        kwargs['translation'] = _translation(args, layout)
     else:
         from mixture_ip_ros.io.dataset import load_dataset
-        if args.observed or args.controlled:
-            raise ValueError('--observed/--controlled name CSV columns; bags have the wrist and '
-                             'the robot joints')
         demos, skipped = load_dataset(args.bag_dir, on_error=args.on_error,
                                       joint_names=robot.joint_names,
                                       transform=robot.world_to_base(), cut=args.cut)
@@ -109,53 +113,143 @@ def _train(args):
     print(json.dumps({'model': str(args.out), **info}))
 
 
-def _floats(text, what):
-    try:
-        values = [float(v) for v in str(text).split(',')]
-    except ValueError:
-        raise ValueError(f'{what} must be a number or comma-separated numbers, got {text!r}') from None
-    return values[0] if len(values) == 1 else values
-
-
 def _evaluate(args):
-    if (args.scenario is None) == (args.csv is None):
-        raise ValueError('give --scenario NAME or --csv DIR (one of them)')
     if args.csv is None:
-        if args.labels or args.observed or args.controlled:
-            raise ValueError('--labels/--observed/--controlled go with --csv')
         from mixture_ip_ros.app.evaluation import evaluate
         metrics = evaluate(args.scenario, Path(args.out), seed=args.seed, quick=args.quick,
                            bag_dir=args.bags, robot=args.robot)
     else:
         from mixture_ip_ros.app.evaluation import evaluate_csv
-        if args.labels is None:
-            raise ValueError('--csv needs --labels FILE (a JSON object: file name -> label)')
-        try:
-            labels = json.loads(Path(args.labels).read_text())
-        except (OSError, ValueError) as error:
-            raise ValueError(f'--labels {args.labels}: not a readable JSON file ({error})') from None
-        if not isinstance(labels, dict):
-            raise ValueError(f'--labels {args.labels}: must be a JSON object, file name -> label')
-        metrics = evaluate_csv(args.csv, labels, _csv_layout(args), Path(args.out),
-                               time_column=args.time, seed=args.seed, quick=args.quick)
+        layout = _csv_layout(args)
+        metrics = evaluate_csv(args.csv, _labels(args.labels), layout, Path(args.out),
+                               time_column=args.time, seed=args.seed, quick=args.quick,
+                               translation=_translation(args, layout))
     print(json.dumps(metrics, indent=1))
 
 
 def _csv_layout(args):
-    """The layout --observed/--controlled (and their units) name."""
+    """The layout --observed/--controlled (and their units) name; ValueError if they name none
+    or contradict each other or --time."""
     from mixture_ip_ros.core.demonstration import Layout
     from mixture_ip_ros.io.csv_files import parse_names
     observed = parse_names(args.observed, '--observed')
     if not observed:
         raise ValueError('--csv needs --observed NAME[,NAME...] (the observed columns)')
     controlled = parse_names(args.controlled, '--controlled')
-    return Layout(observed, controlled, parse_names(args.observed_units, '--observed-units')
-                  or None, parse_names(args.controlled_units, '--controlled-units') or None)
+    layout = Layout(observed, controlled, parse_names(args.observed_units, '--observed-units')
+                    or None, parse_names(args.controlled_units, '--controlled-units') or None)
+    if args.time in observed + controlled:
+        raise ValueError(f'--time {args.time!r} names the time column: it cannot also be an '
+                         f'observed or controlled column')
+    return layout
+
+
+def _translation(args, layout):
+    """The translation groups --translation names for ``layout`` (core.patterns); ValueError
+    where they cannot apply."""
+    from mixture_ip_ros.core.patterns import translation_for
+    groups = translation_for(args.translation, len(layout.observed), len(layout.controlled))
+    units = layout.observed_units + layout.controlled_units
+    for g in groups:
+        if len({units[j] for j in g} - {''}) > 1:          # '' is a unit not given
+            raise ValueError(f'--translation {args.translation}: '
+                             f'{" and ".join((layout.observed + layout.controlled)[j] for j in g)}'
+                             f' move together but have units {[units[j] for j in g]}')
+    return groups
+
+
+def _labels(path):
+    """The --labels file: a JSON object, file name or stem -> label."""
+    try:
+        labels = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as error:
+        raise ValueError(f'--labels {path}: not a readable JSON file ({error})') from None
+    if not isinstance(labels, dict):
+        raise ValueError(f'--labels {path}: must be a JSON object, file name -> label')
+    return labels
+
+
+# -- combinations of options: checked right after parsing, before any data is read, so that a
+# run that cannot succeed fails in a second, not after minutes of training --------------------
+def _given(args, parser, *dests):
+    """The options among ``dests`` set to something other than their defaults, as spelled on
+    the command line."""
+    return ['--' + d.replace('_', '-') for d in dests
+            if getattr(args, d) != parser.get_default(d)]
+
+
+def _check_csv_columns(args, parser):
+    """--observed, --controlled, their units and --time name CSV columns: with --csv they must
+    make a layout, without it they have nothing to name. The layout, or None without --csv."""
+    columns = _given(args, parser, 'observed', 'controlled', 'observed_units',
+                     'controlled_units', 'time', 'translation')
+    if args.csv is None:
+        if columns:
+            parser.error(f'{", ".join(columns)}: for --csv DIR only (they name the columns of '
+                         f'its files)')
+        return None
+    try:
+        layout = _csv_layout(args)
+        _translation(args, layout)
+    except ValueError as error:
+        parser.error(str(error))
+    return layout
+
+
+def _check_train_args(args, parser):
+    """`train`'s options together: exit 2 with one line on the first contradiction."""
+    if (args.bag_dir is None) == (args.csv is None):
+        parser.error('give a folder of bags or --csv DIR (one of them)')
+    layout = _check_csv_columns(args, parser)
+    bag_options = _given(args, parser, 'cut', 'on_error')
+    if args.csv is not None and bag_options:
+        parser.error(f'{", ".join(bag_options)}: for a folder of bags only, not --csv')
+    if args.components is not None and args.criterion != parser.get_default('criterion'):
+        parser.error('--components gives K and --criterion chooses it: give one of them')
+    if args.criterion == 'loo' and layout is not None and not layout.controlled:
+        parser.error("--criterion loo measures how well the controlled agent is predicted: it "
+                     "needs --controlled (without one, use --criterion patterns)")
+    if isinstance(args.observation_noise, list):
+        if layout is None:
+            from mixture_ip_ros.io.dataset import bag_layout
+            layout = bag_layout()
+        if len(args.observation_noise) != len(layout.observed):
+            parser.error(f'--observation-noise: {len(args.observation_noise)} numbers for '
+                         f'{len(layout.observed)} observed DOFs ({", ".join(layout.observed)}); '
+                         f'give one for all or one per DOF')
+
+
+def _check_evaluate_args(args, parser):
+    """`evaluate`'s options together: exit 2 with one line on the first contradiction;
+    ValueError if the --labels file is not a JSON object."""
+    if (args.scenario is None) == (args.csv is None):
+        parser.error('give --scenario NAME or --csv DIR (one of them)')
+    _check_csv_columns(args, parser)
+    if args.csv is None:
+        if args.labels is not None:
+            parser.error('--labels: for --csv DIR only (it labels its files)')
+    elif args.labels is None:
+        parser.error('--csv needs --labels FILE (a JSON object: file name -> label)')
+    else:
+        # A labels file that cannot be read is bad input, as a bad CSV file is (exit 1), but
+        # reading it costs nothing: it fails here, not after the recordings are loaded.
+        _labels(args.labels)
+    robot_options = _given(args, parser, 'bags', 'robot')
+    if robot_options and args.scenario not in ('box_assembly', 'pole'):
+        what = '--csv' if args.csv is not None else f'--scenario {args.scenario}'
+        parser.error(f'{", ".join(robot_options)}: for --scenario box_assembly or pole only, '
+                     f'not {what}')
+    if args.bags is not None and _given(args, parser, 'seed'):
+        parser.error('--seed: the demonstrations it would generate are not used with --bags')
 
 
 def _demo(args):
-    from mixture_ip_ros.app.demo import run_demo
-    run_demo(args)
+    if args.scenario == 'interactions':
+        from mixture_ip_ros.app.interactions import run
+        run(args)
+    else:
+        from mixture_ip_ros.app.demo import run_demo
+        run_demo(args)
 
 
 NODE_SCHEMAS = {'estimator_node': 'mixture_ip_ros.nodes.estimator_node:EstimatorParameters',
@@ -214,6 +308,14 @@ def _add_robot(parser):
                              f'{DEFAULT_ROBOT}')
 
 
+def _add_translation(parser):
+    parser.add_argument('--translation', choices=['none', 'shared', 'observed'], default='none',
+                        help="where a recording happened is not part of its pattern (--csv): "
+                             "'shared' both agents are positions in one frame (observed column i "
+                             "and controlled column i the same axis) and the pair may stand "
+                             "anywhere; 'observed' the same for a single agent; default 'none'")
+
+
 def _add_csv_columns(parser):
     parser.add_argument('--observed', default=None,
                         help='observed agent columns, e.g. x,y,z (--csv)')
@@ -268,9 +370,10 @@ def build_parser():
                         "demonstrations in the space where patterns are found (both agents' "
                         "paths), 'loo' the leave-one-out RMS of the controlled agent given the "
                         "final observed position (the thesis); 'auto' = patterns")
+    _add_translation(t)
     t.add_argument('--noise', choices=['tied', 'per_component'], default='tied',
                    help='observation noise per DOF shared by all components (tied) or per component')
-    t.add_argument('--observation-noise', default=None,
+    t.add_argument('--observation-noise', default=None, type=_noise_stds,
                    help='extra online sensor noise std, one number or one per observed DOF, in '
                         'their units (default: 0.01 for a wrist in m from bags, else 0)')
     t.add_argument('--max-components', type=_bounded(int, 1, name='a whole number'), default=9)
@@ -283,7 +386,7 @@ def build_parser():
                         "or ('recorded') the ones its bag records (mixture_ip_ros.onset_ns / "
                         "end_ns in its metadata custom_data: an annotated data set)")
     _add_robot(t)
-    t.set_defaults(func=_train)
+    t.set_defaults(func=_train, check=partial(_check_train_args, parser=t))
 
     e = sub.add_parser('evaluate', help="the thesis's experiments, real recordings or your own "
                                         'labelled CSV recordings: plots + metrics.json')
@@ -296,6 +399,7 @@ def build_parser():
     e.add_argument('--labels', default=None,
                    help='with --csv: a JSON file mapping each CSV file (name or stem) to its label')
     _add_csv_columns(e)
+    _add_translation(e)
     e.add_argument('--out', required=True, type=_out_dir)
     e.add_argument('--seed', type=int, default=0)
     e.add_argument('--quick', action='store_true', help='fewer components/folds (for smoke runs)')
@@ -304,7 +408,7 @@ def build_parser():
     e.add_argument('--robot', default=None,
                    help='box_assembly and pole: the arm of the demonstrations, a shipped name or '
                         'the path of a robot description file (default: the iiwa14)')
-    e.set_defaults(func=_evaluate)
+    e.set_defaults(func=_evaluate, check=partial(_check_evaluate_args, parser=e))
 
     d = sub.add_parser('demo', help='closed loop: bags -> observer -> estimator -> MuJoCo arm')
     d.add_argument('--scenario', choices=['box_assembly', 'interactions'],
@@ -358,6 +462,8 @@ def main(argv=None):
     logging.basicConfig(level=logging.INFO, format='%(levelname)s %(name)s: %(message)s')
     args = build_parser().parse_args(argv)
     try:
+        if hasattr(args, 'check'):
+            args.check(args)
         args.func(args)
     except (ValueError, OSError) as e:
         print(f'mixture-ip {args.command}: error: {e}', file=sys.stderr)

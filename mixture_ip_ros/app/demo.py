@@ -82,9 +82,7 @@ def prepare(data_dir: Path, out_dir: Path, held_out: int, seed: int, n_component
 
 
 def run_demo(args):
-    if getattr(args, 'scenario', 'box_assembly') == 'interactions':
-        from mixture_ip_ros.app.interactions import run
-        return run(args)
+    """The box-assembly demo (`mixture-ip demo`); the interactions demo is app.interactions."""
     # rclpy only once the data is ready
     from mixture_ip_ros.app.closed_loop import ClosedLoop, points_beyond_limits
 

@@ -38,6 +38,7 @@ from mixture_ip_ros.core.selection import (PRIOR_SCALES, calibrated_heldout_curv
                                            prepare_for_cv, selection_curve)
 from mixture_ip_ros.core.patterns import PatternSpace, heldout_curve, partition_stability
 from mixture_ip_ros.core.novelty import calibrate as calibrate_novelty
+from mixture_ip_ros.core.numerics import first_best, tie_tolerance
 from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE, bag_layout
 from mixture_ip_ros.io.model_file import save_model
 from mixture_ip_ros.robot.description import load_description
@@ -105,6 +106,8 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
     if labels is not None:
         n_components = len(set(labels))
         info['supervised'] = True
+    if params.get('translation'):
+        info['translation'] = [list(g) for g in params['translation']]
     # The curves and floors use per-demonstration regression fits (0.03 s each on the box
     # data): an EM fit takes 10-30 s, and they need dozens. The final model below is fitted
     # with the method asked for.
@@ -157,7 +160,8 @@ def _pattern_selection(demos, candidates, params) -> dict:
     """K by the held-out likelihood in the pattern space (core.patterns), and among the K it
     cannot tell apart, by how reproducible their partitions are."""
     data = prepare_for_cv(demos, params)
-    space = PatternSpace(params.get('n_basis', _DEFAULT_N_BASIS), data.n_observed).fit(data.W)
+    space = PatternSpace(params.get('n_basis', _DEFAULT_N_BASIS), data.n_observed,
+                         translation=params.get('translation', ())).fit(data.W)
     X = space.transform(data.W)
     held = heldout_curve(X, candidates)
     stability = {}
@@ -182,8 +186,8 @@ def _pattern_selection(demos, candidates, params) -> dict:
         agreement = partition_stability(X, [candidates[i] for i in fits])
         median = np.median(agreement, axis=1)
         stability.update({int(candidates[i]): float(m) for i, m in zip(fits, median)})
-        quartile = np.percentile(agreement[np.argmax(median)], 25)
-        ok = [i for i, m in zip(fits, median) if m >= quartile]
+        quartile = np.percentile(agreement[first_best(median)], 25)
+        ok = [i for i, m in zip(fits, median) if m >= quartile - tie_tolerance(agreement)]
         near = not_significantly_worse(held.robust[ok], n_se=1.0)
         return ok[int(np.flatnonzero(near)[0])]
     curve = selection_curve(held.robust, higher_is_better=True, paired=True,
@@ -193,6 +197,7 @@ def _pattern_selection(demos, candidates, params) -> dict:
             'unit': 'nats per demonstration, leave-one-out, in the pattern space',
             'stability': stability,
             'pattern_dims': int(len(space.components_)),
+            'smoothing': data.smoothing.tolist(),
             'explained_variance': float(space.explained_variance_ratio_.sum())}
 
 
@@ -256,7 +261,7 @@ def _calibrated_speed_weight(demos, n_components, labels, n_folds, params):
         n += m
     if n == 0:
         return 1.0, None
-    best = max(range(len(SPEED_WEIGHTS)), key=lambda i: (total[i], SPEED_WEIGHTS[i]))
+    best = first_best(total)              # SPEED_WEIGHTS start at eq. 16's weight, 1
     return SPEED_WEIGHTS[best], {f'{w:g}': float(t / n) for w, t in zip(SPEED_WEIGHTS, total)}
 
 

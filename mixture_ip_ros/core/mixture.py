@@ -23,13 +23,13 @@ from .gmm import (_gmm_log_prob, covariance_penalty_of_m_step, gmm_log_prob,
                   gmm_maximization, gmm_responsibilities, latent_e_step, noise_m_step)
 from .numerics import logsumexp_rows
 from .noise import MAX_LAG_S, correlation_time, noise_factor, residual_autocovariance
-from .patterns import PatternMixture, PatternSpace
+from .patterns import PatternMixture, PatternSpace, offset_operators, translation_groups
 from .interaction import condition_on_observed, trajectory_distribution
 from .phase import (alpha_log_density, alpha_m_step, alpha_penalty, alpha_prior_std,
                     timing_variance)
 from .promp import (ObservationStats, covariance_penalty, expected_sq_residual, log_evidence,
-                    observation_stats, ridge_weights_from_stats, stack_stats, start_ridge,
-                    weight_posterior)
+                    empirical_bayes_smoothing, observation_stats, penalised_weights,
+                    stack_stats, start_ridge, weight_posterior)
 
 
 class Prepared(NamedTuple):
@@ -48,10 +48,12 @@ class Prepared(NamedTuple):
     n_observed: int
     acov: np.ndarray        # (n, 2, D, L + 1): residual autocovariance sums and pair counts
     periods: np.ndarray     # (n,) sample period of each demonstration (s)
+    smoothing: np.ndarray   # (D,) the weights' curvature penalty (None: EM's start weights)
 
     def take(self, idx) -> 'Prepared':
         return Prepared(self.stats.take(idx), self.W[idx], self.sq[idx], self.alphas[idx],
-                        self.timing[idx], self.n_observed, self.acov[idx], self.periods[idx])
+                        self.timing[idx], self.n_observed, self.acov[idx], self.periods[idx],
+                        self.smoothing)
 
 
 class MixtureIProMP:
@@ -96,13 +98,27 @@ class MixtureIProMP:
     lasts as long as it lasts), so the speed that explains a prefix says less about the rest
     than eq. 16 claims. Fitting does not use it; training calibrates it on held-out
     demonstrations (core.online.speed_log_scores).
+
+    ``smoothing`` (None: chosen from the demonstrations) is each DOF's curvature penalty of the
+    per-demonstration weights (eq. 14 with core.promp.penalised_weights; ``method='regression'``):
+    None picks it by empirical Bayes over the demonstrations given to :meth:`prepare`
+    (core.promp.empirical_bayes_smoothing), so that gaps in a recording and a tracker's noise
+    are bridged and filtered as smoothly as the recordings are where they are observed.
+    Fitted: ``smoothing_`` (D,).
+
+    ``translation``: groups of DOF indices (into the stacked [observed, controlled] DOFs) that
+    move together when a demonstration happens elsewhere (core.patterns.translation_for: e.g.
+    both hands' x, y and z). Where it is not part of the pattern: the patterns are found and
+    the mixture fitted on the demonstrations with their offsets removed, and the offset is a
+    variable of its own, shared by every component (:meth:`_add_offsets`). Fitted:
+    ``offset_mean_`` (g,), ``offset_cov_`` (g, g).
     """
 
     def __init__(self, n_components: int = 3, n_basis: int = 15, method: str = 'regression',
                  ridge: float = 1e-6, prior_strength: float = 10.0, prior_scale: float = 0.02,
                  max_iter: int = 200, tol: float = 1e-7, n_init: int = 10, random_state=0,
                  observation_noise=0.0, noise: str = 'tied', noise_var=None,
-                 speed_weight: float = 1.0):
+                 speed_weight: float = 1.0, translation=(), smoothing=None):
         self.n_components = n_components
         self.n_basis = n_basis
         self.method = method
@@ -117,6 +133,8 @@ class MixtureIProMP:
         self.noise = noise
         self.noise_var = noise_var
         self.speed_weight = speed_weight
+        self.translation = translation
+        self.smoothing = smoothing
 
     # ------------------------------------------------------------------ learning
     def fit(self, demonstrations, labels=None, init=None):
@@ -136,6 +154,11 @@ class MixtureIProMP:
         if len(data.W) < self.n_components:
             raise ValueError(f'{len(data.W)} demonstrations are fewer than '
                              f'n_components={self.n_components}')
+        offsets = None
+        if self.translation:
+            T, B = offset_operators(self.n_basis, data.sq.shape[1], self.translation)
+            offsets = data.W @ T.T
+            data = data._replace(W=data.W - offsets @ B.T)
         resp, fixed_noise = self._initialize(data, labels, init)
         params = self._m_step(data, resp, data.W, None, fixed_noise)
         self.log_likelihood_ = []
@@ -159,7 +182,28 @@ class MixtureIProMP:
             resp = new_resp
             params = self._m_step(data, resp, post_means, post_covs, fixed_noise, params)
         self._finish(data, resp, params, fixed_noise)
+        if offsets is not None:
+            self._add_offsets(offsets, B)
         return self
+
+    def _add_offsets(self, offsets, B):
+        """Where the interaction happened, back into every component (``translation``): the
+        mixture was fitted to the demonstrations with their offsets o_i removed (w_i - B o_i,
+        core.patterns.offset_operators), and the offset is a variable of its own, o ~ N(m, S)
+        over all demonstrations, independent of the pattern and of its shape. So each component
+        is N(mu_k + B m, Sigma_k + B S B^T): the same for a demonstration wherever it
+        happened, up to the shared density of its offset, and conditioning on the observed
+        agent infers the offset and moves the controlled agent by it. S is the offsets' sample
+        covariance plus a floor of 1e-6 of its largest variance, for the rare set with fewer
+        demonstrations than offset axes."""
+        n, g = offsets.shape
+        m = offsets.mean(axis=0)
+        E = offsets - m
+        S = E.T @ E / max(n - 1, 1)
+        S += np.eye(g) * max(1e-6 * float(np.max(np.diag(S), initial=0.0)), 1e-12)
+        self.offset_mean_, self.offset_cov_ = m, S
+        self.means_ = self.means_ + B @ m
+        self.covariances_ = self.covariances_ + (B @ S @ B.T)[None]
 
     def prepare(self, demonstrations) -> Prepared:
         """What a fit needs of each demonstration on its own (see :class:`Prepared`),
@@ -175,8 +219,13 @@ class MixtureIProMP:
                 if np.any(st.m < 1):
                     raise ValueError(f'demonstration {demo.name!r} has a DOF never observed; '
                                      "use method='em' for missing data")
-        ridge = start_ridge(self.ridge, self.method)
-        W = np.array([ridge_weights_from_stats(st, ridge) for st in stats])
+        stacked = stack_stats(stats)
+        smoothing = None
+        if self.method == 'regression':
+            smoothing = (empirical_bayes_smoothing(stacked) if self.smoothing is None else
+                         np.broadcast_to(np.asarray(self.smoothing, dtype=float),
+                                         stacked.m.shape[1:]).copy())
+        W = self._weights(stacked, smoothing)
         zero = np.zeros((W.shape[1], W.shape[1]))
         sq = np.array([expected_sq_residual(st, w, zero) for st, w in zip(stats, W)])  # (n, D)
         max_lag = int(np.ceil(MAX_LAG_S / np.median(periods)))
@@ -184,16 +233,17 @@ class MixtureIProMP:
             np.hstack([demo.observed, demo.controlled])
             - basis(demo.phase) @ w.reshape(-1, self.n_basis).T, max_lag)
             for demo, w in zip(demos, W)])
-        return Prepared(stack_stats(stats), W, sq,
+        return Prepared(stacked, W, sq,
                         np.array([1.0 / demo.duration for demo in demos]),
                         timing_variance([demo.duration for demo in demos], periods),
-                        demos[0].n_observed_dofs, acov, periods)
+                        demos[0].n_observed_dofs, acov, periods, smoothing)
 
     def initial_clusters(self, data: Prepared):
         """EM's start (eq. 7's r_ik): the demonstrations' patterns, found in the metric of their
         paths (core.patterns: a mixture in a few principal components of the path
         coordinates), each demonstration in its most probable one."""
-        space = PatternSpace(self.n_basis, data.n_observed, min_components=self.n_components - 1)
+        space = PatternSpace(self.n_basis, data.n_observed, min_components=self.n_components - 1,
+                             translation=self.translation)
         X = space.fit(data.W).transform(data.W)
         mixture = PatternMixture(self.n_components, self.prior_strength, n_init=self.n_init,
                                  random_state=self.random_state).fit(X)
@@ -314,6 +364,7 @@ class MixtureIProMP:
         self.noise_time_ = correlation_time(data.acov[:, 0].sum(axis=0),
                                             data.acov[:, 1].sum(axis=0), self.sample_period_)
         self.n_iter_ = len(self.log_likelihood_)
+        self.smoothing_ = data.smoothing
         self.weights_, self.means_, self.covariances_ = weights, means, covs
         self.resp_ = resp
         self.noise_var_ = noise
@@ -330,6 +381,18 @@ class MixtureIProMP:
                              f'{self.n_components!r}')
         if self.method not in ('regression', 'em'):
             raise ValueError(f"method must be 'regression' or 'em', got {self.method!r}")
+        try:
+            groups = translation_groups(self.translation, 1 << 30)
+        except (TypeError, ValueError):
+            raise ValueError(f'translation must be disjoint groups of DOF indices, got '
+                             f'{self.translation!r}') from None
+        if groups and self.method != 'regression':
+            raise ValueError("translation is available with method='regression' only")
+        if self.smoothing is not None:
+            lam = np.asarray(self.smoothing, dtype=float)
+            if lam.ndim > 1 or not np.all(np.isfinite(lam) & (lam >= 0)):
+                raise ValueError(f'smoothing must be None, a number or one number per DOF, '
+                                 f'each >= 0, got {self.smoothing!r}')
         if self.noise not in ('tied', 'per_component'):
             raise ValueError(f"noise must be 'tied' or 'per_component', got {self.noise!r}")
         on = np.asarray(self.observation_noise, dtype=float)
@@ -419,17 +482,25 @@ class MixtureIProMP:
 
     # --------------------------------------------------------- weight vectors (eqs. 6-7)
     def demonstration_weights(self, demonstrations):
-        """The weight vectors that ``fit`` clusters: eq. 14 per demonstration and DOF (ridge),
+        """The weight vectors that ``fit`` clusters (:meth:`_weights` with the fitted smoothing),
         stacked [observed, controlled]; shape (n, (P+Q) N). Needs every DOF observed."""
         self._check_fitted()
-        W = []
+        stats = []
         for demo in demonstrations:
             st = observation_stats(self.basis_, demo.phase,
                                    np.hstack([demo.observed, demo.controlled]))
             if np.any(st.m < 1):
                 raise ValueError(f'demonstration {demo.name!r} has a DOF never observed')
-            W.append(ridge_weights_from_stats(st, start_ridge(self.ridge, self.method)))
-        return np.array(W)
+            stats.append(st)
+        return self._weights(stack_stats(stats), getattr(self, 'smoothing_', None))
+
+    def _weights(self, stats: ObservationStats, smoothing):
+        """Each demonstration's weights (n, D N) from stacked statistics: eq. 14 with the
+        curvature penalty ``smoothing`` (core.promp.penalised_weights), or, without one (EM's
+        start, a model file from before the smoothing), eq. 14 with the ridge alone."""
+        if smoothing is None:
+            return penalised_weights(stats, 0.0, start_ridge(self.ridge, self.method))
+        return penalised_weights(stats, smoothing, self.ridge)
 
     def score_samples(self, W):
         """log p(w_i) = log sum_k alpha_k N(w_i; mu_k, Sigma_k) (eq. 6) for weight vectors W (n, d)."""

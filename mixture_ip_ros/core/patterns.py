@@ -31,13 +31,84 @@ from scipy.special import gammaln
 
 from .basis import GaussianBasis
 from .kmeans import kmeans
-from .numerics import logsumexp_rows
+from .numerics import logsumexp_rows, tie_tolerance
 from .promp import LOG_2PI
 
 # Share of the spread between demonstrations the pattern space keeps.
 VARIANCE_KEPT = 0.9
 # Degrees of freedom of the pattern mixture's t components (PatternMixture: why t, why 4).
 TAIL_DOF = 4.0
+
+
+def translation_groups(groups, n_dofs: int) -> tuple:
+    """``groups`` checked: DOF indices (into the stacked [observed, controlled] DOFs) that move
+    together when the interaction happens elsewhere, one tuple per axis (e.g. ((0, 3), (1, 4),
+    (2, 5)): both hands' x, y and z); () for none."""
+    out = tuple(tuple(int(j) for j in g) for g in (groups or ()))
+    flat = [j for g in out for j in g]
+    if any(not g for g in out) or len(set(flat)) != len(flat) or not all(
+            0 <= j < n_dofs for j in flat):
+        raise ValueError(f'translation groups must be disjoint, non-empty groups of DOF indices '
+                         f'in 0..{n_dofs - 1}, got {groups!r}')
+    return out
+
+
+TRANSLATION_MODES = ('none', 'shared', 'observed')
+
+
+def translation_for(mode: str, n_observed: int, n_controlled: int) -> tuple:
+    """The translation groups of a named ``mode`` (:data:`TRANSLATION_MODES`):
+
+    - 'none': where a demonstration happened is part of it (one frame for every recording,
+      e.g. a wrist in a fixed robot's base frame);
+    - 'shared': both agents are positions in one frame, observed DOF i and controlled DOF i
+      the same axis, and where the pair stood is not part of the interaction (recordings of
+      several sessions, a tracker's frame that moved): groups (i, P + i);
+    - 'observed': a single agent's positions, where its movement happened not part of it:
+      groups (i,). With a controlled agent it is refused: where a person stands moves a robot's
+      joints in ways a common shift does not describe; name the DOFs that move together.
+    """
+    if mode not in TRANSLATION_MODES:
+        raise ValueError(f'translation must be one of {TRANSLATION_MODES}, got {mode!r}')
+    if mode == 'none':
+        return ()
+    if mode == 'shared':
+        if n_observed != n_controlled:
+            raise ValueError(f"translation 'shared' pairs observed DOF i with controlled DOF i: "
+                             f'it needs as many of each, got {n_observed} and {n_controlled}')
+        return tuple((i, n_observed + i) for i in range(n_observed))
+    if n_controlled:
+        raise ValueError("translation 'observed' is for a single agent; with a controlled agent "
+                         "use 'shared' (both agents' positions in one frame) or name the groups")
+    return tuple((i,) for i in range(n_observed))
+
+
+def offset_operators(n_basis: int, n_dofs: int, groups):
+    """(T (g, D N), B (D N, g)) of the translation ``groups`` (:func:`translation_groups`) in
+    stacked weights of D DOFs: o = T w is each group's offset, the mean over its DOFs of each
+    path's mean position over the phase (the path metric's least-squares common shift, a
+    whole-movement average, not one sample); w + B o moves every DOF of group a by o_a (the
+    basis is normalised, so a constant path c has weights c 1). T B = I, so w - B T w has
+    offset zero and is unchanged by any common shift of a group's DOFs."""
+    groups = translation_groups(groups, n_dofs)
+    T = np.zeros((len(groups), n_dofs * n_basis))
+    B = np.zeros((n_dofs * n_basis, len(groups)))
+    mean_position = GaussianBasis(n_basis).gram().sum(axis=1)    # integral of psi over z
+    for a, g in enumerate(groups):
+        for j in g:
+            T[a, j * n_basis:(j + 1) * n_basis] = mean_position / len(g)
+            B[j * n_basis:(j + 1) * n_basis, a] = 1.0
+    return T, B
+
+
+def without_offsets(W, n_basis: int, groups) -> np.ndarray:
+    """Stacked weights W (n, D N) with each translation group's offset removed (w - B T w,
+    :func:`offset_operators`): what is left of a demonstration wherever it happened."""
+    W = np.asarray(W, dtype=float)
+    if not groups:
+        return W.copy()
+    T, B = offset_operators(n_basis, W.shape[1] // n_basis, groups)
+    return W - (W @ T.T) @ B.T
 
 
 def path_coordinates(W, n_basis: int) -> np.ndarray:
@@ -64,16 +135,17 @@ class PatternSpace:
     """
 
     def __init__(self, n_basis: int, n_observed: int, variance: float = VARIANCE_KEPT,
-                 min_components: int = 1):
+                 min_components: int = 1, translation=()):
         self.n_basis = n_basis
         self.n_observed = n_observed
         self.variance = variance
         self.min_components = min_components
+        self.translation = translation
 
     def fit(self, W) -> 'PatternSpace':
         if not 0 < self.variance <= 1:
             raise ValueError(f'variance must be in (0, 1], got {self.variance!r}')
-        V = path_coordinates(W, self.n_basis)
+        V = path_coordinates(without_offsets(W, self.n_basis, self.translation), self.n_basis)
         n, d = V.shape
         D = d // self.n_basis
         if not 0 < self.n_observed <= D:
@@ -102,7 +174,8 @@ class PatternSpace:
 
     def transform(self, W) -> np.ndarray:
         """(n, q) coordinates of the demonstrations with weights W (n, D N)."""
-        return self._scaled(path_coordinates(W, self.n_basis)) @ self.components_.T
+        V = path_coordinates(without_offsets(W, self.n_basis, self.translation), self.n_basis)
+        return self._scaled(V) @ self.components_.T
 
 
 _trtrs = linalg.lapack.dtrtrs
@@ -209,7 +282,10 @@ class PatternMixture:
             result = self._em(X, R)
             members = np.bincount(np.argmax(result[2], axis=1), minlength=K)
             key = (bool(members.min() >= enough), result[0])
-            if best is None or key > best_key:
+            # A start better by less than a tie (core.numerics) does not replace an earlier
+            # one: two starts that reach the same maximum keep the same one on every machine.
+            if best is None or key[0] > best_key[0] or (
+                    key[0] == best_key[0] and key[1] > best_key[1] + tie_tolerance(key[1])):
                 best, best_key = result, key
         self.log_likelihood_, params, self.resp_, self.n_iter_ = best
         self.weights_, self.means_, self.covariances_ = params

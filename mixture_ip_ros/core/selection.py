@@ -21,7 +21,7 @@ from .basis import GaussianBasis
 from .demonstration import Demonstration
 from .interaction import trajectory_distribution
 from .mixture import MixtureIProMP, Prepared
-from .numerics import logsumexp_rows
+from .numerics import first_best, logsumexp_rows, tie_tolerance
 from .online import prefix_predictions
 from .phase import alpha_log_density
 from .promp import ObservationStats, log_evidence, observation_stats, stack_stats
@@ -361,11 +361,12 @@ def calibrated_heldout_curves(demonstrations, candidates, fractions=COMPLETION_F
                 allowed = (not_significantly_worse(-S[:, a][:, scored], n_se=1.0)
                            if scored.any() else np.ones(len(scales), dtype=bool))
                 ll = scores['loglik'][:, a].mean(axis=1)
-                best[a] = np.argmax(np.where(allowed, ll, -np.inf))
+                best[a] = first_best(np.where(allowed, ll, -np.inf))
         else:
+            # The floors run from the largest, the simplest model: a tie takes it.
             mean = S.mean(axis=2)
-            best = (np.argmin(mean, axis=0) if name.endswith('_rms')
-                    else np.argmax(mean, axis=0))
+            best = np.array([first_best(mean[:, a], not name.endswith('_rms'))
+                             for a in range(len(candidates))], dtype=int)
         out[name] = {'scores': S[best, np.arange(len(candidates))],
                      'prior_scale': [scales[b] for b in best], 'prior_scales': scales,
                      'mean_by_scale': mean}
@@ -375,11 +376,12 @@ def calibrated_heldout_curves(demonstrations, candidates, fractions=COMPLETION_F
 def not_significantly_worse(g, n_se: float = 2.0):
     """Mask of the rows of ``g`` (options, n; per-demonstration scores, higher is better) whose
     paired difference to the best row is within ``n_se`` standard errors: the options the data
-    cannot tell from the best."""
-    d = g[np.argmax(g.mean(axis=1))] - g
+    cannot tell from the best (a difference within :func:`core.numerics.tie_tolerance` of the
+    limit is within)."""
+    d = g[first_best(g.mean(axis=1))] - g
     n = g.shape[1]
     se = d.std(axis=1, ddof=1) / np.sqrt(n) if n > 1 else np.zeros(len(g))
-    return d.mean(axis=1) <= n_se * se
+    return d.mean(axis=1) <= n_se * se + tie_tolerance(g)
 
 
 def select_n_components(scores, higher_is_better: bool = False, paired: bool = False):
@@ -418,11 +420,11 @@ def selection_curve(scores, higher_is_better: bool = False, paired: bool = False
         return float(x.std(ddof=1) / np.sqrt(n)) if n > 1 else 0.0
     mean = s.mean(axis=1)
     se = np.array([se_of(r) for r in s])
-    best = int(np.argmax(g.mean(axis=1)))
+    best = first_best(g.mean(axis=1))
     if paired:
         within = not_significantly_worse(g)
     else:
-        within = g.mean(axis=1) >= g[best].mean() - se[best]
+        within = g.mean(axis=1) >= g[best].mean() - se[best] - tie_tolerance(g)
     if choose is not None and not paired:
         raise ValueError('choose needs the paired plateau')
     plateau = np.flatnonzero(within)
@@ -432,7 +434,7 @@ def selection_curve(scores, higher_is_better: bool = False, paired: bool = False
 
     def beats(a, b):
         d = g[a] - g[b]
-        return d.mean() > 2 * se_of(d)
+        return d.mean() > 2 * se_of(d) + tie_tolerance(g)
     if len(s) == 1:
         clear, note = False, 'a single candidate: nothing was compared'
     elif index > 0:

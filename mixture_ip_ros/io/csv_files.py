@@ -8,7 +8,8 @@ one column per DOF, e.g.
 Each file is one movement: its first row is the onset (times are taken relative to it, in
 seconds) and its last row the end. Every row is kept: an empty or NaN cell in every column of
 an agent marks that agent's sample as missing (an occlusion), never dropped; anything else that
-is not a number is an error. Errors name the file and the line, in one line.
+is not a number is an error. Errors name the file and the line (counted from 1 as a text editor
+counts them, the header being line 1), in one line.
 """
 
 from __future__ import annotations
@@ -35,10 +36,28 @@ def _number(cell: str, path, line: int, column: str) -> float:
     try:
         value = float(cell)
     except ValueError:
-        raise CsvError(f'{path}, line {line}: column {column!r} is not a number: {cell!r}') from None
+        raise CsvError(f'{path}, line {line}: column {column!r} is not a number: '
+                       f'{cell!r}') from None
     if not np.isfinite(value):
-        raise CsvError(f'{path}, line {line}: column {column!r} is {cell!r}')
+        raise CsvError(f'{path}, line {line}: column {column!r} is {cell!r}, not a finite number')
     return value
+
+
+def _numbered_rows(path) -> list:
+    """(line, cells) of every row of ``path``, ``line`` the row's first line as a text editor
+    numbers them (from 1, the header included; a quoted cell may span lines)."""
+    # utf-8-sig: the byte-order mark a spreadsheet may write would otherwise become part of the
+    # first column's name, and 't' would be reported missing from a header that shows it.
+    with open(path, newline='', encoding='utf-8-sig') as f:
+        reader = csv.reader(f)
+        rows, line = [], 1
+        try:
+            for cells in reader:
+                rows.append((line, cells))
+                line = reader.line_num + 1
+        except csv.Error as e:
+            raise CsvError(f'{path}, line {reader.line_num}: {e}') from None
+    return rows
 
 
 def read_csv_demonstration(path, layout: Layout, time: str = 't') -> Demonstration:
@@ -46,45 +65,55 @@ def read_csv_demonstration(path, layout: Layout, time: str = 't') -> Demonstrati
     Raises CsvError with the file and line of the first problem."""
     path = Path(path)
     try:
-        with open(path, newline='') as f:
-            rows = list(csv.reader(f))
-    except (OSError, UnicodeDecodeError, csv.Error) as e:
+        rows = _numbered_rows(path)
+    except (OSError, UnicodeDecodeError) as e:
         raise CsvError(f'{path}: cannot be read ({e})') from None
-    if not rows:
+    if not any(cells for _, cells in rows):
         raise CsvError(f'{path}: empty file')
-    header = [h.strip() for h in rows[0]]
+    if not rows[0][1]:
+        raise CsvError(f'{path}, line 1: empty; the first line is the header naming the columns')
+    header = [h.strip() for h in rows[0][1]]
     wanted = [time, *layout.observed, *layout.controlled]
     missing = [c for c in wanted if c not in header]
     if missing:
         raise CsvError(f'{path}: no column {", ".join(map(repr, missing))} (columns: '
                        f'{", ".join(header)})')
+    twice = [c for c in wanted if header.count(c) > 1]
+    if twice:
+        raise CsvError(f'{path}, line 1: the header names {", ".join(map(repr, twice))} more '
+                       f'than once')
     index = [header.index(c) for c in wanted]
-    data = []
-    for line, row in enumerate(rows[1:], start=2):
+    data, lines = [], []
+    for line, row in rows[1:]:
         if not row or all(not c.strip() for c in row):
             raise CsvError(f'{path}, line {line}: empty row')
         if len(row) != len(header):
             raise CsvError(f'{path}, line {line}: {len(row)} cells for {len(header)} columns')
-        data.append([_number(row[i], path, line, c) for i, c in zip(index, wanted)])
+        values = [_number(row[i], path, line, c) for i, c in zip(index, wanted)]
+        if np.isnan(values[0]):
+            what = 'empty' if not row[index[0]].strip() else 'NaN'
+            raise CsvError(f'{path}, line {line}: time column {time!r} is {what} (every row '
+                           f'needs a time)')
+        data.append(values)
+        lines.append(line)
     if len(data) < 2:
         raise CsvError(f'{path}: needs at least 2 rows of samples, got {len(data)}')
     a = np.array(data)
     t = a[:, 0]
     P = len(layout.observed)
-    for k in range(len(t)):
-        if np.isnan(t[k]):
-            raise CsvError(f'{path}, line {k + 2}: time column {time!r} is empty')
-        if k and t[k] <= t[k - 1]:
-            raise CsvError(f'{path}, line {k + 2}: time {t[k]:g} does not increase (previous '
-                           f'{t[k - 1]:g})')
+    for k in range(1, len(t)):
+        if t[k] <= t[k - 1]:
+            raise CsvError(f'{path}, line {lines[k]}: time {t[k]:g} does not increase (previous '
+                           f'{t[k - 1]:g}, line {lines[k - 1]})')
     for agent, block in (('observed', a[:, 1:1 + P]), ('controlled', a[:, 1 + P:])):
         partial = np.isnan(block).any(axis=1) & ~np.isnan(block).all(axis=1)
         if partial.any():
             k = int(np.argmax(partial))
             names = getattr(layout, agent)
             empty = [n for n, v in zip(names, block[k]) if np.isnan(v)]
-            raise CsvError(f'{path}, line {k + 2}: {agent} columns {", ".join(empty)} are empty '
-                           f'but not the others (a missing sample is empty in every column)')
+            raise CsvError(f'{path}, line {lines[k]}: {agent} columns {", ".join(empty)} are '
+                           f'empty but not the others (a missing sample is empty in every '
+                           f'column)')
     if np.isnan(a[:, 1:1 + P]).all():
         raise CsvError(f'{path}: no observed sample (every observed cell is empty)')
     return Demonstration(t - t[0], a[:, 1:1 + P], a[:, 1 + P:], name=path.name)

@@ -30,7 +30,7 @@ FORMAT_VERSION = 4
 _READABLE_VERSIONS = (1, 2, 3, 4)
 _PARAMS = ('n_components', 'n_basis', 'method', 'ridge', 'prior_strength', 'prior_scale',
            'max_iter', 'tol', 'n_init', 'random_state', 'observation_noise', 'noise',
-           'noise_var', 'speed_weight')
+           'noise_var', 'speed_weight', 'translation', 'smoothing')
 _ARRAYS = ('weights', 'means', 'covariances', 'noise_var', 'alpha_mean', 'alpha_std',
            'prior_cov', 'noise_time')
 
@@ -78,6 +78,12 @@ def save_model(path, model: MixtureIProMP, *, layout: Layout = None, observed_na
         'component_labels': list(component_labels) if component_labels is not None else None,
         'log_likelihood': [float(v) for v in model.log_likelihood_],
         'sample_period': float(model.sample_period_),
+        # Fitted, for the record (the online estimator reads the means and covariances, which
+        # hold them): the weights' smoothing per DOF and, with translation groups, the offsets'
+        # mean and covariance.
+        'smoothing': _jsonable_param(getattr(model, 'smoothing_', None)),
+        'offsets': (None if getattr(model, 'offset_mean_', None) is None else
+                    {'mean': model.offset_mean_.tolist(), 'cov': model.offset_cov_.tolist()}),
         'novelty': None if (novelty := getattr(model, 'novelty_', None)) is None else {
             'prefix': [float(v) for v in novelty.prefix], 'window': float(novelty.window),
             'window_size': novelty.window_size, 'min_interval': novelty.min_interval},
@@ -183,12 +189,29 @@ def load_model(path, *, observed_names=None, controlled_names=None):
         setattr(model, name + '_', data[name])
     model.log_likelihood_ = meta.get('log_likelihood', [])
     model.sample_period_ = float(period)
+    try:
+        smoothing = meta.get('smoothing')
+        model.smoothing_ = None if smoothing is None else _finite(smoothing, (P + Q,))
+        offsets = meta.get('offsets')
+        if offsets is not None:
+            g = len(model.translation or ())
+            model.offset_mean_ = _finite(offsets['mean'], (g,))
+            model.offset_cov_ = _finite(offsets['cov'], (g, g))
+    except (KeyError, TypeError, ValueError) as e:
+        fail(f'invalid fitted smoothing or offsets ({e})')
     model.classes_ = meta.get('classes')
     try:
         model.novelty_ = novelty_thresholds(meta)
     except (KeyError, TypeError, ValueError) as e:
         fail(f'invalid novelty thresholds ({e})')
     return model, meta
+
+
+def _finite(values, shape):
+    a = np.asarray(values, dtype=float)
+    if a.shape != shape or not np.all(np.isfinite(a)):
+        raise ValueError(f'expected {shape} finite numbers, got shape {a.shape}')
+    return a
 
 
 def novelty_thresholds(meta):

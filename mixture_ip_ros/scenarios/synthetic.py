@@ -41,7 +41,7 @@ def mixture_demos(seed=0, counts=(12, 14, 10), n_obs=3, n_ctrl=4, n_basis=8, noi
     for k, c in enumerate(counts):
         cov = random_spd(rng, d, spread, rank=6)
         for _ in range(c):
-            w = rng.multivariate_normal(means[k], cov)
+            w = rng.multivariate_normal(means[k], cov, method="cholesky")
             T = rng.uniform(*durations[k])
             t, Y = sample_trajectory(basis, w, D, T, noise=noise, rng=rng)
             demos.append(Demonstration(t, Y[:, :n_obs], Y[:, n_obs:], label=str(k)))

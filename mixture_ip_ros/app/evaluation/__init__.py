@@ -12,6 +12,7 @@ Every scenario measures the model ``training.train`` ships for its training demo
 
 from __future__ import annotations
 
+from dataclasses import replace
 import json
 import time
 from pathlib import Path
@@ -108,11 +109,14 @@ def evaluate(scenario: str, out_dir: Path, seed: int = 0, quick: bool = False, *
 
 
 def evaluate_csv(csv_dir, labels: dict, layout, out_dir: Path, time_column: str = 't',
-                 seed: int = 0, quick: bool = False, config: Optional[EvalConfig] = None) -> dict:
+                 seed: int = 0, quick: bool = False, config: Optional[EvalConfig] = None,
+                 translation=()) -> dict:
     """The interactions' cross-validated metrics and baselines on your own labelled
     recordings: a folder of CSV demonstrations (io.csv_files, any numbers of observed and
     controlled DOFs named by ``layout``) and ``labels`` {file stem or name: label}. Errors are in
-    cm when every controlled DOF is in metres, else in the DOFs' own unit."""
+    cm when every controlled DOF is in metres, else in the DOFs' own unit. ``translation``:
+    the model's translation groups (core.patterns.translation_for), which the nearest-neighbour
+    baseline is given too."""
     from mixture_ip_ros.app.evaluation.interactions import evaluate_labelled, interactions_config
     from mixture_ip_ros.io.csv_files import load_csv_dataset
     demos = load_csv_dataset(csv_dir, layout, time=time_column)
@@ -126,8 +130,10 @@ def evaluate_csv(csv_dir, labels: dict, layout, out_dir: Path, time_column: str 
     out_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     cm = bool(layout.controlled) and all(u == 'm' for u in layout.controlled_units)
-    metrics = evaluate_labelled(demos, out_dir, config or interactions_config(quick), 'csv',
-                                seed, cm=cm)
+    config = config or interactions_config(quick)
+    if translation:
+        config = replace(config, model={**config.model, 'translation': tuple(translation)})
+    metrics = evaluate_labelled(demos, out_dir, config, 'csv', seed, cm=cm)
     return _write(out_dir, {'scenario': 'csv', 'seed': int(seed), 'source': str(csv_dir),
                             **metrics, 'runtime_s': round(time.perf_counter() - t0, 2)})
 

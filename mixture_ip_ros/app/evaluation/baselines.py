@@ -139,44 +139,82 @@ class NearestNeighbour:
     fast it went; dtaidistance, squared differences); its label names the pattern, and its
     controlled agent, time-scaled by the match (the training time where the prefix ended over
     the prefix's own duration), is the prediction of the rest. Series are taken at the
-    estimator's rate (``min_interval``), the samples the mixture sees."""
+    estimator's rate (``min_interval``), the samples the mixture sees.
 
-    def __init__(self, min_interval: float = 0.05):
+    ``translation``: the mixture's translation groups (core.patterns.translation_groups;
+    indices into the stacked [observed, controlled] DOFs), given where the model is told that
+    where the interaction happened is not part of it. The baseline then gets the same
+    knowledge: the observed DOFs of a group are compared by their velocities (derivative DTW,
+    Keogh and Pazzani 2001; backward differences per second, so that a prefix uses its own
+    samples and dropped frames do not count as stops), and the partner predicted is
+    the match's moved by the difference of the two observed prefixes' mean positions (the
+    prefix against the part of the training recording it was matched with)."""
+
+    def __init__(self, min_interval: float = 0.05, translation=()):
         self.min_interval = min_interval
+        self.translation = translation
 
     def _series(self, demo):
         rows = np.flatnonzero(~np.isnan(demo.observed).any(axis=1))
         rows = rows[decimated_rows(demo.t[rows], self.min_interval)]
-        return demo.t[rows], np.ascontiguousarray(demo.observed[rows], dtype=np.double)
+        t, Y = demo.t[rows], np.array(demo.observed[rows], dtype=np.double)
+        moved = self._moved_observed
+        if moved:
+            # Velocities from each sample and the one before (a prefix's own samples only, as
+            # online), per second (stamps jitter and frames drop); the first takes the second's.
+            X = Y[:, moved]
+            V = np.zeros_like(X)
+            V[1:] = np.diff(X, axis=0) / np.diff(t)[:, None]
+            V[0] = V[1] if len(V) > 1 else 0.0
+            Y[:, moved] = V
+        return t, np.ascontiguousarray(Y), demo.observed[rows]
 
     def fit(self, demos, labels):
+        from mixture_ip_ros.core.patterns import translation_groups
         self.demos_ = list(demos)
         self.labels_ = list(labels)
+        P, Q = self.demos_[0].n_observed_dofs, self.demos_[0].n_controlled_dofs
+        groups = translation_groups(self.translation, P + Q)
+        self._moved_observed = [j for g in groups for j in g if j < P]
+        # Each controlled DOF a group moves, with the observed DOFs of its group (a group with
+        # none of them: nothing observed says where it went).
+        self._moves_with = {j - P: [i for i in g if i < P] for g in groups for j in g
+                            if j >= P and any(i < P for i in g)}
         self._train = [self._series(d) for d in self.demos_]
         return self
 
     def matches(self, demo, fractions):
-        """Per fraction, (index of the nearest training recording, time scale)."""
+        """Per fraction, (index of the nearest training recording, time scale, how far the
+        controlled agent is moved (Q,))."""
         from dtaidistance import dtw_ndim
-        t, Y = self._series(demo)
+        t, Y, raw = self._series(demo)
         ends = [max(1, int(np.searchsorted(t, f * demo.duration + 1e-9, side='right')))
                 for f in fractions]
         best = [None] * len(fractions)
-        for i, (t_tr, Y_tr) in enumerate(self._train):
+        for i, (t_tr, Y_tr, _) in enumerate(self._train):
             # One accumulated-cost matrix gives every prefix's open-end distance: its row.
             _, paths = dtw_ndim.warping_paths_fast(Y, Y_tr)
             for c, n in enumerate(ends):
                 row = paths[n, 1:]
                 j = int(np.argmin(row))
                 if best[c] is None or row[j] < best[c][0]:
-                    best[c] = (row[j], i, t_tr[j] / t[n - 1] if t[n - 1] > 0 else 1.0)
-        return [(i, scale) for _, i, scale in best]
+                    best[c] = (row[j], i, j, t_tr[j] / t[n - 1] if t[n - 1] > 0 else 1.0)
+        out = []
+        for (_, i, j, scale), n in zip(best, ends):
+            shift = np.zeros(demo.n_controlled_dofs)
+            for q, obs in self._moves_with.items():
+                shift[q] = np.mean(raw[:n, obs]) - np.mean(self._train[i][2][:j + 1, obs])
+            out.append((i, scale, shift))
+        return out
 
-    def predict(self, index, scale, times):
+    def predict(self, index, scale, times, shift=None):
         """The label of training recording ``index`` and its controlled agent at ``times`` (s
-        since onset) time-scaled by ``scale``, (len, Q)."""
+        since onset) time-scaled by ``scale`` and moved by ``shift`` (Q,), (len, Q); Q = 0 for
+        a single-agent recording, whose label is still the prediction."""
         d = self.demos_[index]
         keep = ~np.isnan(d.controlled).any(axis=1)
         s = np.clip(np.asarray(times, dtype=float) * scale, 0.0, d.t[keep][-1])
-        return self.labels_[index], np.column_stack([np.interp(s, d.t[keep], d.controlled[keep, j])
-                                                     for j in range(d.n_controlled_dofs)])
+        pred = np.empty((s.size, d.n_controlled_dofs))
+        for j in range(d.n_controlled_dofs):
+            pred[:, j] = np.interp(s, d.t[keep], d.controlled[keep, j])
+        return self.labels_[index], pred if shift is None else pred + shift

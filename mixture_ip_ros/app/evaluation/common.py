@@ -32,7 +32,9 @@ class EvalConfig:
 
     ``model`` holds MixtureIProMP constructor parameters (besides n_components). ``fold_stride``
     > 1 holds out only every stride-th demonstration (each model is still trained on all the
-    others); ``subsample`` keeps every n-th time step of every demonstration.
+    others); ``subsample`` keeps every n-th time step of every demonstration;
+    ``train_fraction`` < 1 (labelled recordings, app.evaluation.interactions) trains each fold
+    on that share of its training recordings of every label (seeded), tested on all held out.
     """
 
     candidates: Sequence[int] = tuple(range(1, 7))
@@ -43,6 +45,7 @@ class EvalConfig:
     n_alpha: int = 50
     min_interval: float = 0.05
     classes: Optional[Sequence[str]] = None       # a subset of the classes (gestures only)
+    train_fraction: float = 1.0
 
     def to_dict(self):
         d = asdict(self)

@@ -69,6 +69,20 @@ def stratified_folds(labels, n_folds: int = N_FOLDS, seed: int = 0) -> np.ndarra
     return fold
 
 
+def kept_share(rows, labels, fraction: float, seed: int) -> np.ndarray:
+    """``fraction`` of ``rows`` of every label (at least two each, rounded), drawn with
+    ``seed``; sorted."""
+    if not 0 < fraction <= 1:
+        raise ValueError(f'train_fraction must be in (0, 1], got {fraction!r}')
+    rng = np.random.default_rng(seed)
+    keep = []
+    for lbl in sorted(set(labels[rows].tolist()), key=str):
+        members = rows[labels[rows] == lbl]
+        n = min(len(members), max(2, int(round(fraction * len(members)))))
+        keep.append(rng.choice(members, n, replace=False))
+    return np.sort(np.concatenate(keep))
+
+
 def _ari(a, b) -> float:
     from sklearn.metrics import adjusted_rand_score
     return float(adjusted_rand_score(a, b))
@@ -88,6 +102,8 @@ def _fold(demos, labels, fold, config: EvalConfig, seed: int, f: int) -> dict:
     has_partner = demos[0].n_controlled_dofs > 0
     fractions = tuple(float(x) for x in config.fractions)
     train_i, test_i = np.flatnonzero(fold != f), np.flatnonzero(fold == f)
+    if config.train_fraction < 1:
+        train_i = kept_share(train_i, labels, config.train_fraction, seed + f)
     train = [demos[i] for i in train_i]
     shape = (len(test_i), len(fractions))
     right = {m: np.zeros(shape, dtype=bool) for m in METHODS}
@@ -127,13 +143,14 @@ def _fold(demos, labels, fold, config: EvalConfig, seed: int, f: int) -> dict:
     t0 = time.perf_counter()
     clustering = clustering_baselines(train, labels[train_i], len(classes),
                                       seeds=range(seed, seed + 5))
-    nn = NearestNeighbour(config.min_interval).fit(train, labels[train_i])
+    nn = NearestNeighbour(config.min_interval, config.model.get('translation', ())).fit(
+        train, labels[train_i])
     for r, i in enumerate(test_i):
         d = demos[i]
-        for c, (j, scale) in enumerate(nn.matches(d, fractions)):
+        for c, (j, scale, shift) in enumerate(nn.matches(d, fractions)):
             rest = np.flatnonzero((d.t > fractions[c] * d.duration + 1e-9)
                                   & ~np.isnan(d.controlled).any(axis=1))
-            label, pred = nn.predict(j, scale, d.t[rest])
+            label, pred = nn.predict(j, scale, d.t[rest], shift)
             right['nearest'][r, c] = label == labels[i]
             if rest.size and has_partner:
                 rms['nearest'][r, c], final['nearest'][r, c] = _errors(pred, d.controlled[rest])
