@@ -6,7 +6,7 @@ JSON object: per kernel the decisions, whether they are all the same, and how fa
 curves behind them are (they differ by rounding only).
 
     OPENBLAS_NUM_THREADS=1 python bench/cpu_kernels.py [--cases layouts-1-2,...]
-    OPENBLAS_NUM_THREADS=1 python bench/cpu_kernels.py --tests   # the decision tests instead
+    OPENBLAS_NUM_THREADS=1 python bench/cpu_kernels.py --tests [--kernels Haswell,Sandybridge]
 
 ``--tests`` runs the tests marked ``decision`` (a chosen K or a recognition rate asserted) under
 every kernel and reports each kernel's pass and fail counts: minutes per kernel.
@@ -98,6 +98,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--cases', default=','.join(CASES))
     ap.add_argument('--tests', action='store_true', help='run the decision tests instead')
+    ap.add_argument('--kernels', default=None,
+                    help='comma-separated kernels (default: every one this CPU runs)')
     ap.add_argument('--worker', action='store_true', help=argparse.SUPPRESS)
     args = ap.parse_args()
     names = args.cases.split(',')
@@ -107,6 +109,12 @@ def main():
         print(json.dumps(decisions(names)))
         return
     kernels = runnable_kernels()
+    if args.kernels:
+        asked = args.kernels.split(',')
+        if set(asked) - set(kernels):
+            raise SystemExit(f'this CPU cannot run {sorted(set(asked) - set(kernels))}; it runs '
+                             f'{kernels}')
+        kernels = asked
     if args.tests:
         out = {}
         for k in kernels:      # one at a time: each run uses both cores

@@ -146,3 +146,24 @@ def test_em_training_of_demonstrations_missing_an_agent_keeps_the_configured_spe
     assert model.speed_weight == info['speed_weight'] == 1.0 and 'speed_scores' not in info
     assert train(gappy, n_components=3, method='em', n_basis=8,
                  speed_weight=0.2)[0].speed_weight == 0.2
+
+
+def test_training_says_where_its_time_went_stage_by_stage(tmp_path):
+    """Every stage's time in the summary, in order; shown as a line when it ends (and its name
+    when it starts, on a terminal)."""
+    from mixture_ip_ros.app.training import Stages, text_stages, train_to_file
+    from mixture_ip_ros.core.demonstration import Layout
+    from mixture_ip_ros.scenarios.synthetic import mixture_demos
+    demos = mixture_demos(seed=1, n_obs=1, n_ctrl=1, counts=(5, 5, 5))[0]
+    log, terminal = io.StringIO(), _Terminal()
+    for i, stream in enumerate((log, terminal)):
+        _, info = train_to_file(demos, tmp_path / f'm{i}.npz', layout=Layout(('o',), ('c',)),
+                                candidates=(1, 2, 3), n_basis=6,
+                                stages=Stages(text_stages(stream)))
+    names = ['choosing K', 'covariance floor', 'speed weight', 'final fit', 'novelty', 'saving']
+    assert list(info['seconds']) == names and all(s >= 0 for s in info['seconds'].values())
+    lines = log.getvalue().splitlines()
+    assert [ln.split(': ')[0] for ln in lines] == names and all(ln.endswith(' s') for ln in lines)
+    shown = terminal.getvalue().splitlines()
+    assert shown[0] == 'choosing K ...' and shown[1].startswith('choosing K: ')
+    assert len(shown) == 2 * len(names)

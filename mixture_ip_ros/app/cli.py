@@ -77,7 +77,7 @@ def _generate(args):
 
 
 def _train(args):
-    from mixture_ip_ros.app.training import text_progress, train_to_file
+    from mixture_ip_ros.app.training import Stages, text_progress, text_stages, train_to_file
     from mixture_ip_ros.robot.description import load_description
     robot = load_description(args.robot)
     kwargs = {'n_basis': args.n_basis, 'method': args.method, 'criterion': args.criterion,
@@ -104,12 +104,16 @@ def _train(args):
         kwargs['n_components'] = args.components
     else:
         kwargs['candidates'] = range(1, args.max_components + 1)
-        kwargs['progress'] = text_progress(what='choosing K')
-    model, info = train_to_file(demos, args.out, layout=layout, robot=robot, **kwargs)
+        kwargs['progress'] = text_progress(what='held-out fits')
+    model, info = train_to_file(demos, args.out, layout=layout, robot=robot,
+                                stages=Stages(text_stages()), **kwargs)
     sel = info.get('selection')
     if sel is not None and not sel['clear_optimum']:
         print(f"warning: K = {sel['chosen']} by {sel['criterion']}: {sel['note']}",
               file=sys.stderr)
+    print('where the time went: ' + ', '.join(f'{name} {s:.1f} s'
+                                             for name, s in info['seconds'].items()),
+          file=sys.stderr)
     print(json.dumps({'model': str(args.out), **info}))
 
 

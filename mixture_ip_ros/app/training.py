@@ -23,9 +23,11 @@ Why not the held-out likelihood of the full model: a dozen demonstrations per pa
 distinct interactions, while the pattern space finds them (docs/results.md, NuiSI).
 """
 
+from contextlib import contextmanager
 import inspect
 import logging
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -75,6 +77,46 @@ def text_progress(stream=None, what='choosing K'):
     return show
 
 
+class Stages:
+    """Where training's time goes: the wall time of each named stage (s) in ``seconds``, and
+    each stage's start and end shown by ``show(name, seconds)`` (seconds None at the start;
+    None: nothing shown). Used as ``with stages('choosing K'): ...``."""
+
+    def __init__(self, show=None):
+        self.seconds = {}
+        self.show = show
+
+    @contextmanager
+    def __call__(self, name):
+        if self.show:
+            self.show(name, None)
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            spent = time.perf_counter() - t0
+            self.seconds[name] = round(self.seconds.get(name, 0.0) + spent, 3)
+            if self.show:
+                self.show(name, spent)
+
+
+def text_stages(stream=None):
+    """Training's stages on ``stream`` (default: stderr): a stage's name as it starts on a
+    terminal (its fits' bar follows, text_progress), and a line with its time as it ends."""
+    stream = sys.stderr if stream is None else stream
+    isatty = getattr(stream, 'isatty', None)
+    on_terminal = bool(isatty and isatty())
+
+    def show(name, seconds):
+        if seconds is None:
+            if on_terminal:
+                stream.write(f'{name} ...\n')
+        else:
+            stream.write(f'{name}: {seconds:.1f} s\n')
+        stream.flush()
+    return show
+
+
 _DEFAULT_N_BASIS = inspect.signature(MixtureIProMP).parameters['n_basis'].default
 
 
@@ -86,16 +128,19 @@ def _curve_summary(candidates, scores, curve):
 
 
 def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str = 'auto',
-          n_folds: int = 5, progress=None, labels=None, prior_scales=PRIOR_SCALES, **params):
+          n_folds: int = 5, progress=None, labels=None, prior_scales=PRIOR_SCALES, stages=None,
+          **params):
     """Fit the mixture; K given, or chosen by ``criterion`` ('auto' = 'patterns', or 'loo';
     see the module docstring). ``labels`` makes a supervised fit (one component per class,
     K = number of classes). ``params`` go to MixtureIProMP; without ``prior_scale`` among them,
     the floor is calibrated over ``prior_scales`` on ``n_folds`` held-out folds. Returns
     (model, info dict): info['selection'] holds the curve of the criterion, the chosen K, its
     floor and whether the curve has a clear optimum (a flat curve is reported as such, never
-    silently read as K = 1).
+    silently read as K = 1); info['seconds'] the time of each stage (``stages``, a
+    :class:`Stages`, also shows them).
     """
     demos = list(demos)
+    stages = Stages() if stages is None else stages
     if criterion not in CRITERIA:
         raise ValueError(f'criterion must be one of {CRITERIA}, got {criterion!r}')
     if not demos:
@@ -122,11 +167,12 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
         candidates = [int(k) for k in candidates if k <= len(demos) - 1]
         if not candidates or len(demos) < 3:
             raise ValueError(f'{len(demos)} demonstrations are too few to choose K')
-        if criterion == 'patterns':
-            selection = _pattern_selection(demos, candidates, curve_params)
-        else:
-            selection = _loo_selection(demos, candidates, n_folds, progress, prior_scales,
-                                       curve_params)
+        with stages('choosing K'):
+            if criterion == 'patterns':
+                selection = _pattern_selection(demos, candidates, curve_params)
+            else:
+                selection = _loo_selection(demos, candidates, n_folds, progress, prior_scales,
+                                           curve_params)
         n_components = selection['chosen']
         if not selection['clear_optimum']:
             logger.warning('K = %d by %s, but %s', n_components, criterion, selection['note'])
@@ -137,22 +183,26 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
         if criterion == 'loo' and 'selection' in info:
             params = {**params, 'prior_scale': info['selection']['prior_scale']}
         elif n_components <= n_train:
-            params = {**params, 'prior_scale': _calibrated_floor(
-                demos, n_components, n_folds, progress, prior_scales, curve_params)}
+            with stages('covariance floor'):
+                params = {**params, 'prior_scale': _calibrated_floor(
+                    demos, n_components, n_folds, progress, prior_scales, curve_params)}
         if 'selection' in info:
             info['selection']['prior_scale'] = params.get('prior_scale')
     # The same for the speed weight; EM's demonstrations may lack a whole agent, which the
     # regression fits of the calibration cannot take: EM keeps the configured weight.
     if 'speed_weight' not in params and params.get('method') != 'em':
-        weight, scores = _calibrated_speed_weight(demos, n_components, labels, n_folds,
-                                                  {**params, 'method': 'regression'})
+        with stages('speed weight'):
+            weight, scores = _calibrated_speed_weight(demos, n_components, labels, n_folds,
+                                                      {**params, 'method': 'regression'})
         params = {**params, 'speed_weight': weight}
         info['speed_scores'] = scores
-    model = MixtureIProMP(n_components=n_components, **params).fit(demos, labels=labels)
+    with stages('final fit'):
+        model = MixtureIProMP(n_components=n_components, **params).fit(demos, labels=labels)
     info['n_components'] = int(n_components)
     info['prior_scale'] = float(model.prior_scale)
     info['speed_weight'] = float(model.speed_weight)
     info['noise_var'] = np.asarray(model.noise_var_).tolist()
+    info['seconds'] = dict(stages.seconds)
     return model, info
 
 
@@ -327,18 +377,22 @@ def train_to_file(demos, out_path, layout: Layout = None, observed_frame: str = 
     layout = (layout or default_layout(demos, robot)).check(demos)
     if layout.observed == bag_layout().observed and layout.observed_units == ('m',) * 3:
         kwargs.setdefault('observation_noise', WRIST_OBSERVATION_NOISE)
+    stages = kwargs.setdefault('stages', Stages())
     model, info = train(demos, **kwargs)
     if kwargs.get('labels') is None:
         # Held-out folds fitted by regression, as the K curves: EM would take minutes.
         params = {**_model_params(kwargs), 'method': 'regression',
                   'prior_scale': model.prior_scale}      # the floor chosen with K
-        model.novelty_ = calibrate_novelty(
-            demos, lambda part: MixtureIProMP(n_components=model.n_components,
-                                              **params).fit(part))
+        with stages('novelty'):
+            model.novelty_ = calibrate_novelty(
+                demos, lambda part: MixtureIProMP(n_components=model.n_components,
+                                                  **params).fit(part))
         info['novelty'] = {'prefix': model.novelty_.prefix.round(3).tolist(),
                            'window': round(model.novelty_.window, 3)}
-    save_model(Path(out_path), model, layout=layout,
-               observed_frame=robot.base_frame if observed_frame is None else observed_frame,
-               component_labels=component_labels(model, demos),
-               extra={'training': info, 'robot': robot.name})
+    with stages('saving'):
+        save_model(Path(out_path), model, layout=layout,
+                   observed_frame=robot.base_frame if observed_frame is None else observed_frame,
+                   component_labels=component_labels(model, demos),
+                   extra={'training': info, 'robot': robot.name})
+    info['seconds'] = dict(stages.seconds)
     return model, info

@@ -184,12 +184,17 @@ def _fold_tasks(demos, config: EvalConfig, seed: int) -> list:
 
 def _run(tasks) -> list:
     """The tasks' results in order, one process per core. Each task is pickled to its worker
-    with its recordings; fork spares the workers importing the package and compiling the
-    estimator's kernels again."""
+    with its recordings. The workers are forked from a server process that imported this
+    module and nothing else (multiprocessing's forkserver), not from the caller: a worker
+    forked from a process that had run ROS nodes inherited their DDS threads' objects, and its
+    garbage collector crashed it (a segmentation fault in the test suite). The estimator's
+    kernels come compiled from numba's cache."""
     workers = min(len(tasks), len(os.sched_getaffinity(0)))
     if workers <= 1:
         return [task() for task in tasks]
-    with ProcessPoolExecutor(workers, mp_context=get_context('fork')) as pool:
+    context = get_context('forkserver')
+    context.set_forkserver_preload([__name__])
+    with ProcessPoolExecutor(workers, mp_context=context) as pool:
         return [job.result() for job in [pool.submit(task) for task in tasks]]
 
 
