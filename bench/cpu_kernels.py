@@ -53,7 +53,8 @@ def decisions(names) -> dict:
         out[name] = {'K': info['n_components'], 'prior_scale': info['prior_scale'],
                      'speed_weight': info['speed_weight'],
                      'partition': np.argmax(model.resp_, axis=1).tolist(),
-                     'curve': sel['mean'], 'stability': sel['stability']}
+                     'smoothing': sel['smoothing'], 'curve': sel['mean'],
+                     'stability': sel['stability']}
     return out
 
 
@@ -72,7 +73,7 @@ def run_kernels(args_for_worker, kernels):
         k, p = next(iter(procs.items()))
         out, err = p.communicate()
         del procs[k]
-        if p.returncode != 0 and '--tests' not in args_for_worker:
+        if p.returncode != 0:
             raise RuntimeError(f'{k}: worker failed: {err.strip().splitlines()[-1:]}')
         results[k] = out
     return results
@@ -87,7 +88,8 @@ def compare(per_kernel: dict) -> dict:
     for case, d in first.items():
         for k in kernels[1:]:
             other = per_kernel[k][case]
-            for key in ('K', 'prior_scale', 'speed_weight', 'partition'):
+            for key in ('K', 'prior_scale', 'speed_weight', 'partition', 'smoothing',
+                        'stability'):
                 same &= other[key] == d[key]
             a, b = np.array(d['curve']), np.array(other['curve'])
             spread = max(spread, float(np.max(np.abs(a - b) / np.maximum(np.abs(a), 1.0))))

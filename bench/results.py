@@ -47,6 +47,7 @@ def jobs():
                           str(OUT / 'robustness')], None)
     out['cpu_kernels'] = ([sys.executable, str(ROOT / 'bench' / 'cpu_kernels.py')], None)
     out['train'] = ([sys.executable, str(ROOT / 'bench' / 'train.py')], None)
+    out['train_scaling'] = ([sys.executable, str(ROOT / 'bench' / 'train_scaling.py')], None)
     out['estimator'] = ([sys.executable, str(ROOT / 'bench' / 'estimator.py')], None)
     out['sim'] = ([sys.executable, str(ROOT / 'bench' / 'sim.py')], None)
     out['soak'] = ([sys.executable, str(ROOT / 'bench' / 'soak.py'), '--minutes', '3', '--load',
@@ -273,7 +274,7 @@ def page(R: dict) -> str:
                      f"{run_['tracking_rms_mrad_max']:.3f} mrad | "
                      f"{run_['refused_trajectories']} | {run_['points_beyond_limits']} |")
         L.append('')
-    bench = [(k, R.get(k)) for k in ('train', 'estimator', 'sim', 'soak')]
+    bench = [(k, R.get(k)) for k in ('train', 'train_scaling', 'estimator', 'sim', 'soak')]
     if any(b for _, b in bench):
         L += ['## Benchmarks (`bench/<name>.py`, one JSON object each, in '
               f'`{OUT.relative_to(ROOT)}`)', '']
@@ -284,6 +285,15 @@ def page(R: dict) -> str:
                      f"{t['chosen']}, floor {t['prior_scale']}), the straightforward loop "
                      f"{t.get('reference', {}).get('train_s', float('nan')):.2f} s, same "
                      f"selection: {t.get('same_selection')}.")
+        ts = R.get('train_scaling')
+        if ts:
+            lay = ts['layout_10_dofs_36x300']
+            L.append('- `train_scaling.py`: `mixture-ip train` on generated box assembly, seconds '
+                     'by number of demonstrations: ' + ', '.join(
+                         f'{n}: {s:.1f}' for n, s in zip(ts['sizes'], ts['seconds']))
+                     + f" (time ~ N^{ts['exponent']:.2f}); 36 demonstrations of 10 DOFs x 300 "
+                     f"samples {lay['seconds']:.1f} s. Stages at N = {ts['sizes'][-1]}: "
+                     + ', '.join(f'{k} {v:.1f} s' for k, v in ts['stages'][-1].items()) + '.')
         e = R.get('estimator')
         if e:
             L.append(f"- `estimator.py`: one observation absorbed by the online estimator "

@@ -95,8 +95,7 @@ def main():
     unknown = set(cases) - set(CASES)
     if unknown or not set(versions) <= set(nuisi.VERSIONS):
         raise SystemExit(f'unknown cases {sorted(unknown)} or versions {versions}')
-    if 'clean' not in cases:
-        cases = ['clean'] + cases              # the partner's errors are read against it
+    cases = ['clean'] + [c for c in cases if c != 'clean']   # the partner's are read against it
     t0 = time.perf_counter()
     base = interactions_config()
     runs, tasks = [], []

@@ -68,13 +68,13 @@ def plain_heldout(demos, candidates, fractions=(), prior_scales=(), n_folds=5, p
     controlled agent's RMS) by the straightforward loop (one fit per fold and floor)."""
     import numpy as np
     from mixture_ip_ros.core.mixture import MixtureIProMP
-    from mixture_ip_ros.core.selection import cv_folds, online_rms
+    from mixture_ip_ros.core.selection import cv_folds, online_rms, prepare_for_cv
     fold = cv_folds(len(demos), n_folds, fold_seed)
     scales = [float(s) for s in prior_scales]
     params = {k: v for k, v in params.items() if k != 'prior_scale'}
     # The weights' smoothing is the set's (chosen once on every demonstration, as the folds
     # of the fast path share it): each fold's fit from scratch is given it.
-    params.setdefault('smoothing', MixtureIProMP(1, **params).prepare(demos).smoothing)
+    params.setdefault('smoothing', prepare_for_cv(demos, params).smoothing)
     shape = (len(scales), len(candidates), len(demos))
     S = {'loglik': np.empty(shape), 'controlled_rms': np.empty(shape)}
     for b, scale in enumerate(scales):

@@ -13,7 +13,8 @@ from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.selection import COMPLETION_FRACTIONS
 from mixture_ip_ros.core.selection import (calibrated_heldout_curves, controlled_rms, cv_folds,
-                                           online_rms, score_completion, selection_curve)
+                                           online_rms, prepare_for_cv, score_completion,
+                                           selection_curve)
 from mixture_ip_ros.core.promp import (log_evidence, observation_stats, stack_stats,
                                        weight_posterior)
 from mixture_ip_ros.scenarios.synthetic import mixture_demos, random_spd
@@ -106,7 +107,7 @@ def test_completion_curves_equal_the_straightforward_loop(n_ctrl):
     assert set(cal) == {'loglik', 'completion', 'completion_rms'} | (
         {'controlled_rms'} if n_ctrl else set())
     fold = cv_folds(len(demos), 5, 0)
-    smoothing = MixtureIProMP(1, n_basis=8).prepare(demos).smoothing     # the set's, shared
+    smoothing = prepare_for_cv(demos, {'n_basis': 8}).smoothing        # the set's, shared
     density, rms, ctrl, ll = (np.empty((2, 3, len(demos))) for _ in range(4))
     for b, scale in enumerate(scales):
         for a, K in enumerate(candidates):

@@ -11,7 +11,7 @@ from mixture_ip_ros.app.training import train
 from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.core.kmeans import kmeans
 from mixture_ip_ros.core.mixture import MixtureIProMP
-from mixture_ip_ros.core.selection import (controlled_rms, cv_folds,
+from mixture_ip_ros.core.selection import (controlled_rms, cv_folds, prepare_for_cv,
                                            loo_rms_by_components)
 from mixture_ip_ros.scenarios.synthetic import mixture_demos
 
@@ -44,7 +44,7 @@ def set_smoothing(demos, **params):
     """The weights' smoothing of the whole set (core.promp.empirical_bayes_smoothing): chosen
     once for the demonstrations cross-validation prepares and shared by its folds, so a plain
     loop that fits each fold from scratch is given it."""
-    return MixtureIProMP(1, **params).prepare(demos).smoothing
+    return prepare_for_cv(demos, params).smoothing
 
 
 def plain_heldout(demos, candidates, scales, n_folds=5, **params):

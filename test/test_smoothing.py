@@ -137,3 +137,15 @@ def test_a_bad_smoothing_is_refused_by_name(bad):
     from mixture_ip_ros.core.mixture import MixtureIProMP
     with pytest.raises(ValueError, match='smoothing'):
         MixtureIProMP(1, smoothing=bad)._check_params()
+
+
+def test_a_smoothing_of_the_wrong_length_or_for_em_is_refused_by_name():
+    from mixture_ip_ros.core.mixture import MixtureIProMP
+    from mixture_ip_ros.scenarios.synthetic import mixture_demos
+    demos = mixture_demos(seed=1, n_obs=1, n_ctrl=1, counts=(3, 3, 3))[0]
+    with pytest.raises(ValueError, match='3 values for 2 DOFs'):
+        MixtureIProMP(1, n_basis=8, smoothing=[0.1, 0.1, 0.1]).fit(demos)
+    with pytest.raises(ValueError, match="smoothing is for method='regression'"):
+        MixtureIProMP(1, n_basis=8, method='em', smoothing=0.1)._check_params()
+    m = MixtureIProMP(1, n_basis=8, smoothing=0.1).fit(demos)
+    assert np.array_equal(m.smoothing_, [0.1, 0.1])

@@ -113,3 +113,32 @@ def test_translation_modes_name_their_groups_and_refuse_what_they_cannot_mean():
     demos = mixture_demos(seed=1, n_obs=1, n_ctrl=1, counts=(3, 3, 3))[0]
     with pytest.raises(ValueError, match='0..1'):
         MixtureIProMP(1, n_basis=8, translation=((0, 5),)).fit(demos)
+
+
+def test_a_model_file_whose_groups_name_dofs_it_has_not_is_refused(tmp_path):
+    import json
+    from mixture_ip_ros.io.model_file import ModelFileError, load_model, save_model
+    demos = mixture_demos(seed=1, n_obs=3, n_ctrl=3, counts=(4, 4, 4))[0]
+    model = MixtureIProMP(2, n_basis=8, translation=np.array(GROUPS)).fit(demos)
+    path = tmp_path / 'm.npz'
+    save_model(path, model, observed_names=['x', 'y', 'z'], controlled_names=['a', 'b', 'c'])
+    loaded, meta = load_model(path)
+    assert loaded.translation == GROUPS and meta['params']['translation'] == [[0, 3], [1, 4],
+                                                                              [2, 5]]
+    with np.load(path) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    meta['params']['translation'] = [[0, 9]]
+    arrays['metadata'] = np.array(json.dumps(meta))
+    np.savez(tmp_path / 'bad.npz', **arrays)
+    with pytest.raises(ModelFileError, match='invalid parameters'):
+        load_model(tmp_path / 'bad.npz')
+
+
+def test_em_with_translation_is_refused_before_training(tmp_path, capsys):
+    from mixture_ip_ros.app.cli import main
+    (tmp_path / 'csv').mkdir()
+    with pytest.raises(SystemExit) as exit_:
+        main(['train', '--csv', str(tmp_path / 'csv'), '--observed', 'x,y,z', '--controlled',
+              'a,b,c', '--translation', 'shared', '--method', 'em', '--out',
+              str(tmp_path / 'm.npz')])
+    assert exit_.value.code == 2 and 'with --method regression only' in capsys.readouterr().err

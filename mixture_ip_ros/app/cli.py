@@ -111,9 +111,10 @@ def _train(args):
     if sel is not None and not sel['clear_optimum']:
         print(f"warning: K = {sel['chosen']} by {sel['criterion']}: {sel['note']}",
               file=sys.stderr)
-    print('where the time went: ' + ', '.join(f'{name} {s:.1f} s'
-                                             for name, s in info['seconds'].items()),
-          file=sys.stderr)
+    if info.get('seconds'):
+        print('where the time went: ' + ', '.join(f'{name} {s:.1f} s'
+                                                 for name, s in info['seconds'].items()),
+              file=sys.stderr)
     print(json.dumps({'model': str(args.out), **info}))
 
 
@@ -210,6 +211,9 @@ def _check_train_args(args, parser):
         parser.error(f'{", ".join(bag_options)}: for a folder of bags only, not --csv')
     if args.components is not None and args.criterion != parser.get_default('criterion'):
         parser.error('--components gives K and --criterion chooses it: give one of them')
+    if args.method == 'em' and args.translation != 'none':
+        parser.error("--translation: with --method regression only (EM from missing data "
+                     "does not take the offsets out)")
     if args.criterion == 'loo' and layout is not None and not layout.controlled:
         parser.error("--criterion loo measures how well the controlled agent is predicted: it "
                      "needs --controlled (without one, use --criterion patterns)")

@@ -38,7 +38,8 @@ from mixture_ip_ros.core.online import SPEED_WEIGHTS, speed_log_scores
 from mixture_ip_ros.core.selection import (PRIOR_SCALES, calibrated_heldout_curves, cv_folds,
                                            loo_rms_by_components, not_significantly_worse,
                                            prepare_for_cv, selection_curve)
-from mixture_ip_ros.core.patterns import PatternSpace, heldout_curve, partition_stability
+from mixture_ip_ros.core.patterns import (PatternSpace, heldout_curve, partition_stability,
+                                          translation_groups)
 from mixture_ip_ros.core.novelty import calibrate as calibrate_novelty
 from mixture_ip_ros.core.numerics import first_best, tie_tolerance
 from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE, bag_layout
@@ -151,8 +152,10 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
     if labels is not None:
         n_components = len(set(labels))
         info['supervised'] = True
-    if params.get('translation'):
-        info['translation'] = [list(g) for g in params['translation']]
+    groups = translation_groups(params.get('translation'), demos[0].n_observed_dofs
+                                + demos[0].n_controlled_dofs)
+    if groups:
+        info['translation'] = [list(g) for g in groups]
     # The curves and floors use per-demonstration regression fits (0.03 s each on the box
     # data): an EM fit takes 10-30 s, and they need dozens. The final model below is fitted
     # with the method asked for.

@@ -35,7 +35,9 @@ from .promp import (ObservationStats, covariance_penalty, expected_sq_residual, 
 class Prepared(NamedTuple):
     """What a fit needs of each demonstration on its own, whatever the other demonstrations it
     is fitted with (:meth:`MixtureIProMP.prepare`): the observation statistics (stacked,
-    promp.stack_stats), the eq. 14 weights W (n, d), the squared residuals at them (n, D),
+    promp.stack_stats), the weights W (n, d) (:meth:`MixtureIProMP._weights`: eq. 14 smoothed as
+    the set's recordings are, the smoothing chosen on every demonstration prepared, held-out
+    folds included: one unsupervised number per DOF that the folds share), the squared residuals at them (n, D),
     alpha = 1/T and the timing variance (n,), the residuals' autocovariances and sample
     periods (core.noise). Cross-validation computes them once, and every fold and K takes its
     demonstrations from them (:meth:`take`)."""
@@ -48,7 +50,7 @@ class Prepared(NamedTuple):
     n_observed: int
     acov: np.ndarray        # (n, 2, D, L + 1): residual autocovariance sums and pair counts
     periods: np.ndarray     # (n,) sample period of each demonstration (s)
-    smoothing: np.ndarray   # (D,) the weights' curvature penalty (None: EM's start weights)
+    smoothing: object       # (D,) the weights' curvature penalty (None: EM's start weights)
 
     def take(self, idx) -> 'Prepared':
         return Prepared(self.stats.take(idx), self.W[idx], self.sq[idx], self.alphas[idx],
@@ -155,7 +157,7 @@ class MixtureIProMP:
             raise ValueError(f'{len(data.W)} demonstrations are fewer than '
                              f'n_components={self.n_components}')
         offsets = None
-        if self.translation:
+        if translation_groups(self.translation, data.sq.shape[1]):
             T, B = offset_operators(self.n_basis, data.sq.shape[1], self.translation)
             offsets = data.W @ T.T
             data = data._replace(W=data.W - offsets @ B.T)
@@ -222,9 +224,14 @@ class MixtureIProMP:
         stacked = stack_stats(stats)
         smoothing = None
         if self.method == 'regression':
-            smoothing = (empirical_bayes_smoothing(stacked) if self.smoothing is None else
-                         np.broadcast_to(np.asarray(self.smoothing, dtype=float),
-                                         stacked.m.shape[1:]).copy())
+            if self.smoothing is None:
+                smoothing = empirical_bayes_smoothing(stacked)
+            else:
+                smoothing = np.asarray(self.smoothing, dtype=float)
+                if smoothing.size not in (1, stacked.m.shape[1]):
+                    raise ValueError(f'smoothing has {smoothing.size} values for '
+                                     f'{stacked.m.shape[1]} DOFs (give one, or one per DOF)')
+                smoothing = np.broadcast_to(smoothing, stacked.m.shape[1:]).copy()
         W = self._weights(stacked, smoothing)
         zero = np.zeros((W.shape[1], W.shape[1]))
         sq = np.array([expected_sq_residual(st, w, zero) for st, w in zip(stats, W)])  # (n, D)
@@ -389,6 +396,9 @@ class MixtureIProMP:
         if groups and self.method != 'regression':
             raise ValueError("translation is available with method='regression' only")
         if self.smoothing is not None:
+            if self.method != 'regression':
+                raise ValueError("smoothing is for method='regression' (EM starts from eq. 14's "
+                                 'ridge weights and learns the rest)')
             lam = np.asarray(self.smoothing, dtype=float)
             if lam.ndim > 1 or not np.all(np.isfinite(lam) & (lam >= 0)):
                 raise ValueError(f'smoothing must be None, a number or one number per DOF, '
@@ -497,7 +507,7 @@ class MixtureIProMP:
     def _weights(self, stats: ObservationStats, smoothing):
         """Each demonstration's weights (n, D N) from stacked statistics: eq. 14 with the
         curvature penalty ``smoothing`` (core.promp.penalised_weights), or, without one (EM's
-        start, a model file from before the smoothing), eq. 14 with the ridge alone."""
+        start, a model file without a recorded smoothing), eq. 14 with the ridge alone."""
         if smoothing is None:
             return penalised_weights(stats, 0.0, start_ridge(self.ridge, self.method))
         return penalised_weights(stats, smoothing, self.ridge)

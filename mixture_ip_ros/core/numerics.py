@@ -47,7 +47,8 @@ TIE_RTOL = 1e-9
 
 def tie_tolerance(*values) -> float:
     """The absolute difference below which numbers of the magnitude of ``values`` are a tie."""
-    scale = max((float(np.max(np.abs(v))) for v in values if np.size(v)), default=0.0)
+    finite = [np.abs(v)[np.isfinite(v)] for v in map(np.asarray, values)]
+    scale = max((float(np.max(f)) for f in finite if f.size), default=0.0)
     return TIE_RTOL * max(scale, 1.0)
 
 
@@ -60,4 +61,4 @@ def first_best(values, higher_is_better: bool = True) -> int:
     if not finite.any():
         return 0
     top = np.max(g[finite])
-    return int(np.flatnonzero(finite & (g >= top - tie_tolerance(v[finite])))[0])
+    return int(np.flatnonzero(finite & (g >= top - tie_tolerance(top)))[0])

@@ -23,6 +23,7 @@ stops rising (:func:`heldout_curve`, read by ``mixture.selection_curve``).
 The full Mixture of Interaction ProMPs (core.mixture) starts its EM from these clusters.
 """
 
+import operator
 from typing import NamedTuple
 
 import numpy as np
@@ -44,7 +45,7 @@ def translation_groups(groups, n_dofs: int) -> tuple:
     """``groups`` checked: DOF indices (into the stacked [observed, controlled] DOFs) that move
     together when the interaction happens elsewhere, one tuple per axis (e.g. ((0, 3), (1, 4),
     (2, 5)): both hands' x, y and z); () for none."""
-    out = tuple(tuple(int(j) for j in g) for g in (groups or ()))
+    out = tuple(tuple(operator.index(j) for j in g) for g in (() if groups is None else groups))
     flat = [j for g in out for j in g]
     if any(not g for g in out) or len(set(flat)) != len(flat) or not all(
             0 <= j < n_dofs for j in flat):
@@ -105,8 +106,8 @@ def without_offsets(W, n_basis: int, groups) -> np.ndarray:
     """Stacked weights W (n, D N) with each translation group's offset removed (w - B T w,
     :func:`offset_operators`): what is left of a demonstration wherever it happened."""
     W = np.asarray(W, dtype=float)
-    if not groups:
-        return W.copy()
+    if not translation_groups(groups, W.shape[1] // n_basis):
+        return W
     T, B = offset_operators(n_basis, W.shape[1] // n_basis, groups)
     return W - (W @ T.T) @ B.T
 
@@ -129,7 +130,9 @@ class PatternSpace:
     ``n_observed``: DOFs of the observed agent (the first ``n_observed`` weight blocks), the
     rest are the controlled agent's. ``min_components``: at least this many principal
     components (K patterns need K - 1 directions between their means, which need not hold 10 %
-    of the spread when two patterns are close). Fitted attributes: ``mean_`` (D N,),
+    of the spread when two patterns are close). ``translation``: groups of DOFs whose common
+    offset is no part of a pattern (:func:`translation_for`); each demonstration's is removed
+    (:func:`without_offsets`) before anything else. Fitted attributes: ``mean_`` (D N,),
     ``scale_`` (D,) per DOF (one value per agent), ``components_`` (q, D N),
     ``explained_variance_ratio_`` (q,).
     """

@@ -1,5 +1,6 @@
-"""Probabilistic Movement Primitives: weights by ridge regression (eq. 14) and by EM from
-partially observed demonstrations (eqs. 21-33, appendix A).
+"""Probabilistic Movement Primitives: weights by regression (eq. 14, with a ridge or with a
+curvature penalty whose strength empirical Bayes chooses) and by EM from partially observed
+demonstrations (eqs. 21-33, appendix A).
 
 Weight layout, used everywhere in the package: the weight vector of D DOFs is
 [w_dof0 (N), w_dof1 (N), ...], so the position of DOF j at phase z is psi(z) . w[jN:(j+1)N].
@@ -79,7 +80,7 @@ def ridge_weights_from_stats(st: ObservationStats, ridge: float) -> np.ndarray:
     return np.concatenate([np.linalg.solve(st.G[j] + eye, st.b[j]) for j in range(len(st.m))])
 
 
-# Smoothing strengths the empirical-Bayes smoother chooses among (:func:`smoothed_weights`), in
+# Smoothing strengths empirical_bayes_smoothing chooses among (:func:`penalised_weights`), in
 # units of the basis Gram matrix of the samples: wide enough for dense 30 Hz recordings
 # (about 1e-4) and sparse ones with gaps (about 1).
 SMOOTHING = tuple(float(f'{10.0 ** e:.3g}') for e in np.arange(-6.0, 4.01, 0.5))

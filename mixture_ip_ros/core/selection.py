@@ -65,8 +65,8 @@ def loo_rms_by_components(demonstrations, candidates, observe: str = 'final', pr
     single-agent set use the held-out log-likelihood of :func:`calibrated_heldout_curves`).
 
     Every fold's model is the one ``MixtureIProMP(K, **params).fit`` learns from the other
-    demonstrations; what each demonstration contributes on its own (statistics, eq. 14
-    weights) is computed once for all folds.
+    demonstrations; what each demonstration contributes on its own (statistics, weights at the
+    set's smoothing) is computed once for all folds.
 
     Returns an array (len(candidates), n) of per-demonstration RMS errors.
     """
@@ -363,7 +363,7 @@ def calibrated_heldout_curves(demonstrations, candidates, fractions=COMPLETION_F
                 ll = scores['loglik'][:, a].mean(axis=1)
                 best[a] = first_best(np.where(allowed, ll, -np.inf))
         else:
-            # The floors run from the largest, the simplest model: a tie takes it.
+            # A tie takes the first floor: PRIOR_SCALES run from the largest, the simplest.
             mean = S.mean(axis=2)
             best = np.array([first_best(mean[:, a], not name.endswith('_rms'))
                              for a in range(len(candidates))], dtype=int)

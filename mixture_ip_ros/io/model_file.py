@@ -23,6 +23,7 @@ from mixture_ip_ros.core.basis import GaussianBasis
 from mixture_ip_ros.core.demonstration import Layout
 from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.novelty import NoveltyThresholds
+from mixture_ip_ros.core.patterns import translation_groups
 from mixture_ip_ros.io.files import write_atomic
 
 FORMAT = 'mixture_ip_ros/mixture-iprompt'
@@ -40,6 +41,8 @@ class ModelFileError(ValueError):
 
 
 def _jsonable_param(v):
+    if isinstance(v, (tuple, list)):
+        return [_jsonable_param(x) for x in v]
     if isinstance(v, np.ndarray):
         return v.tolist()
     if isinstance(v, np.generic):
@@ -181,6 +184,7 @@ def load_model(path, *, observed_names=None, controlled_names=None):
     model = MixtureIProMP(**{p: params[p] for p in _PARAMS if p in params})
     try:
         model._check_params()
+        model.translation = translation_groups(model.translation, P + Q)
     except (TypeError, ValueError) as e:
         fail(f'invalid parameters ({e})')
     model.basis_ = basis

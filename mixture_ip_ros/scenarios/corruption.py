@@ -101,9 +101,10 @@ def reclocked(demos, rng, jitter_std=DEFAULTS.jitter_std, drop=DEFAULTS.drop,
 
 
 def corrupted(demos, which, seed: int = 0, magnitudes: Corruption = DEFAULTS) -> list:
-    """``demos`` with the corruptions named in ``which`` ('offset', 'noise', 'clock'; in that
-    order, each from its own stream of ``seed``): the clock first changes the stamps, then the
-    noise runs over them, then the pair is moved."""
+    """``demos`` with the corruptions named in ``which`` ('offset', 'noise', 'clock'), each from
+    its own stream of ``seed`` (the streams in that order, so that one corruption's draws do not
+    depend on which others are asked for); applied as a tracker would add them: the clock first
+    changes the stamps, then the noise runs over them, then the pair is moved."""
     unknown = set(which) - {'offset', 'noise', 'clock'}
     if unknown:
         raise ValueError(f'unknown corruptions {sorted(unknown)}; known: offset, noise, clock')

@@ -75,7 +75,7 @@ class PerClassProMP:
 
 
 def sklearn_gmm_accuracy(W_train, labels_train, W_test, labels_test, n_components, seeds):
-    """scikit-learn's GaussianMixture (full covariances) on ridge weights with the given K, the
+    """scikit-learn's GaussianMixture (full covariances) on weight vectors with the given K, the
     best of ``seeds`` by training likelihood, components named by majority over the training
     labels. Returns (accuracy, the chosen seed)."""
     from sklearn.mixture import GaussianMixture

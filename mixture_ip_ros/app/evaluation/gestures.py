@@ -4,7 +4,7 @@ gestures (unsupervised: K chosen as training chooses it; components named by maj
 training labels), phase unknown (online) and known (the same samples), and online once the end
 time is given (the phase is 1 there); by the supervised mixture (one component per person); and
 baselines on the same split in the same run: a per-class ProMP, scikit-learn's GaussianMixture
-on the same ridge weights, 1-NN DTW."""
+on the model's weights, 1-NN DTW."""
 
 from __future__ import annotations
 

@@ -16,7 +16,7 @@ from mixture_ip_ros.app.evaluation.common import (EvalConfig, feed_until, observ
                                                   trained, with_default_noise)
 from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.online import OnlineEstimator
-from mixture_ip_ros.core.promp import observation_stats, ridge_weights, weight_posterior
+from mixture_ip_ros.core.promp import observation_stats, weight_posterior
 from mixture_ip_ros.scenarios.letters import LETTER_OBSERVATION_NOISE
 from mixture_ip_ros.viz import plots
 
@@ -141,7 +141,7 @@ def evaluate_missing_data(data, out_dir: Path, config: EvalConfig = None) -> dic
     w_em = weight_posterior(st, em.means_[0], linalg.cho_factor(em.covariances_[0], lower=True),
                             em.noise_var_)[0]
     N = em.n_basis
-    w_reg = ridge_weights(models['regression'].basis_, z, demo.observed, models['regression'].ridge)
+    w_reg = models['regression'].demonstration_weights([demo])[0]
     psi = em.basis_(z)
     recon = {'regression': psi @ w_reg.reshape(-1, N).T, 'em': psi @ w_em.reshape(-1, N).T}
     plots.missing_data(out_dir / 'missing_data_rms_em_vs_regression.png',
