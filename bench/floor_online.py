@@ -22,7 +22,7 @@ import numpy as np
 from mixture_ip_ros.app.evaluation.common import majority_labels, trained
 from mixture_ip_ros.app.evaluation.interactions import (FRACTIONS, N_FOLDS, _errors,
                                                         interactions_config, stratified_folds)
-from mixture_ip_ros.core.online import prefix_predictions
+from mixture_ip_ros.core.online import OnlineEstimator, prefix_predictions
 from mixture_ip_ros.core.selection import calibrated_heldout_curves
 from mixture_ip_ros.scenarios import nuisi
 
@@ -56,9 +56,10 @@ def main():
                                        random_state=0)[0]
         for key, model in models.items():
             names = majority_labels(model, train)
+            est = OnlineEstimator(model, n_alpha=config.n_alpha,
+                                  min_interval=config.min_interval)
             for i in test_i:
-                for c, (k, pred, rest) in enumerate(prefix_predictions(
-                        model, demos[i], FRACTIONS, config.n_alpha, config.min_interval)):
+                for c, (k, pred, rest) in enumerate(prefix_predictions(est, demos[i], FRACTIONS)):
                     right[key][i, c] = names[k] == labels[i]
                     if pred is not None:
                         rms[key][i, c] = _errors(pred, demos[i].controlled[rest])[0]

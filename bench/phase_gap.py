@@ -30,13 +30,13 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 import numpy as np  # noqa: E402
 
-from mixture_ip_ros.app.evaluation.common import (decimated_rows, feed_until,  # noqa: E402
+from mixture_ip_ros.app.evaluation.common import (decimated_rows,  # noqa: E402
                                                   majority_labels, online_component_given_end,
                                                   online_components, phase_known_components)
 from mixture_ip_ros.app.evaluation.gestures import GESTURE_FRACTIONS  # noqa: E402
 from mixture_ip_ros.core.interaction import trajectory_distribution  # noqa: E402
 from mixture_ip_ros.core.mixture import MixtureIProMP  # noqa: E402
-from mixture_ip_ros.core.online import OnlineEstimator  # noqa: E402
+from mixture_ip_ros.core.online import OnlineEstimator, feed_until, observed_rows  # noqa: E402
 from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE  # noqa: E402
 from mixture_ip_ros.scenarios.folders import generate  # noqa: E402
 from mixture_ip_ros.scenarios.letters import LETTER_OBSERVATION_NOISE, phase_letters  # noqa: E402
@@ -144,7 +144,7 @@ def box_assembly():
             demos[:i] + demos[i + 1:])
         names = majority_labels(model, demos[:i] + demos[i + 1:])
         q_true = kin.fk(test.controlled[-1])[0]
-        rows = np.flatnonzero(~np.isnan(test.observed).any(axis=1))
+        rows = observed_rows(test)
         labels.append(test.label)
         for v, (settings, refine) in variants.items():
             est = OnlineEstimator(model, **settings)

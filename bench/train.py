@@ -9,11 +9,13 @@ fit (fit_s), the novelty calibration (novelty_s) and the save (save_s). n_fits c
 mixture fit; peak_rss_mb is the run's peak resident memory. Top-level keys are medians over the
 runs (the machine may be shared).
 
-``reference`` is the same path with the floor's held-out curves computed by the straightforward
-loop, one MixtureIProMP(...).fit of the demonstrations of each fold (same folds, seeds and
-floors), in the same script: the ratio ``speedup_vs_reference`` is what reusing
-per-demonstration work across folds gains; ``same_selection`` whether both chose the same K and
-floor with curves equal to 1e-9.
+``reference`` is the same path by the straightforward loop, in the same script: the floor's
+held-out curves from one MixtureIProMP(...).fit of the demonstrations of each fold (same folds,
+seeds and floors), and every EM run of the pattern mixture (each start of each leave-one-out
+and cluster-stability fit) on its own rather than side by side (PatternMixture.fit_many). The
+ratio ``speedup_vs_reference`` is what reusing per-demonstration work across folds and batching
+the pattern fits gain; ``same_selection`` whether both chose the same K and floor with curves
+equal to 1e-9.
 
 Prints one JSON object.
 
@@ -84,7 +86,7 @@ def plain_heldout(demos, candidates, fractions=(), prior_scales=(), n_folds=5, p
                 model = MixtureIProMP(n_components=K, prior_scale=scale, **params).fit(
                     [d for d, g in zip(demos, fold) if g != f])
                 S['loglik'][b, a, test] = model.score_demonstrations([demos[i] for i in test])
-                S['controlled_rms'][b, a, test] = [online_rms(model, demos[i])
+                S['controlled_rms'][b, a, test] = [online_rms(model, [demos[i]])[0]
                                                    for i in test]
     out = {}
     for name, scores in S.items():
@@ -108,15 +110,26 @@ def plain_heldout(demos, candidates, fractions=(), prior_scales=(), n_folds=5, p
     return out
 
 
+def plain_ecm(batched):
+    """PatternMixture._ecm run on one start at a time (the straightforward loop)."""
+    import numpy as np
+
+    def ecm(self, X, R, floors):
+        runs = [batched(self, X[b:b + 1], R[b:b + 1], floors[b:b + 1]) for b in range(len(X))]
+        return tuple(np.concatenate(parts) for parts in zip(*runs))
+    return ecm
+
+
 def one_run(bags: Path, reference: bool) -> dict:
     """Load and train once in this process (the way `mixture-ip train` does)."""
     from mixture_ip_ros.app import training
-    from mixture_ip_ros.core import mixture
+    from mixture_ip_ros.core import mixture, patterns
     from mixture_ip_ros.io.dataset import load_dataset
     from mixture_ip_ros.robot.description import load_description
     phases = Phases()
     if reference:
         training.calibrated_heldout_curves = plain_heldout
+        patterns.PatternMixture._ecm = plain_ecm(patterns.PatternMixture._ecm)
     phases.wrap(training, '_pattern_selection', 'patterns_s')
     phases.wrap(training, 'calibrated_heldout_curves', 'heldout_s')
     phases.wrap(training, 'calibrate_novelty', 'novelty_s')

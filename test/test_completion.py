@@ -119,7 +119,7 @@ def test_completion_curves_equal_the_straightforward_loop(n_ctrl):
                 density[b, a, test], rms[b, a, test] = dd.mean(axis=1), rr.mean(axis=1)
                 ll[b, a, test] = model.score_demonstrations([demos[i] for i in test])
                 if n_ctrl:
-                    ctrl[b, a, test] = [online_rms(model, demos[i]) for i in test]
+                    ctrl[b, a, test] = [online_rms(model, [demos[i]])[0] for i in test]
     best = np.argmax(density.mean(axis=2), axis=0)
     assert cal['completion']['prior_scale'] == [scales[i] for i in best]
     assert np.allclose(cal['completion']['scores'], density[best, range(3)], rtol=1e-10)
@@ -163,7 +163,8 @@ def test_online_rms_is_the_estimators_prediction_of_the_rest():
     from mixture_ip_ros.core.online import OnlineEstimator
     demos = mixture_demos(seed=3, n_obs=2, n_ctrl=2, counts=(8, 9, 7))[0]
     model = MixtureIProMP(3, n_basis=8, speed_weight=0.2).fit(demos[3:])
-    for demo in demos[:3]:
+    got = online_rms(model, demos[:3])          # one estimator, reset for each
+    for demo, rms in zip(demos[:3], got):
         rows = decimated_rows(demo.t, 0.05)
         want = []
         for f in (0.3, 0.5, 0.7):
@@ -173,7 +174,7 @@ def test_online_rms_is_the_estimators_prediction_of_the_rest():
             rest = demo.t > f * demo.duration
             pred = est.expected_controlled(demo.t[rest])[1]
             want.append(np.sqrt(np.mean((pred - demo.controlled[rest]) ** 2)))
-        assert online_rms(model, demo) == pytest.approx(np.mean(want), rel=1e-9)
+        assert rms == pytest.approx(np.mean(want), rel=1e-9)
 
 
 def test_completion_and_heldout_loglik_on_ten_sampled_sets_of_three_patterns():

@@ -250,3 +250,80 @@ def test_the_plateau_keeps_the_smallest_k_whose_partition_is_as_reproducible():
     assert seen == [[1, 2, 3]] and curve['index'] == 3
     with pytest.raises(ValueError):
         selection_curve(scores, True, paired=True, choose=lambda plateau: 0)
+
+
+def _plain_ecm(X, R, prior_strength, floor, dof, tol, max_iter):
+    """One ECM run of PatternMixture written out per component from the formulas (scipy's
+    multivariate t for the densities): (log-likelihood, weights, means, scales, the
+    responsibilities they came from, iteration) of its best iteration."""
+    from scipy.special import logsumexp
+    from scipy.stats import multivariate_t
+    n, q = X.shape
+    K = R.shape[1]
+    tiny = 10 * np.finfo(float).eps
+    U, prev, best = np.ones_like(R), -np.inf, None
+    for it in range(1, max_iter + 1):
+        nk = R.sum(axis=0) + tiny
+        RU = R * U
+        means = np.array([RU[:, k] @ X / (RU[:, k].sum() + tiny) for k in range(K)])
+        scatter = [(RU[:, k, None] * (X - means[k])).T @ (X - means[k]) for k in range(K)]
+        pooled = sum(scatter) / n
+        covs = np.array([(scatter[k] + prior_strength * pooled) / (nk[k] + prior_strength)
+                         + np.diag(floor) for k in range(K)])
+        lp = np.log(nk / n) + np.column_stack(
+            [multivariate_t(means[k], covs[k], df=dof).logpdf(X) for k in range(K)])
+        norm = logsumexp(lp, axis=1)
+        ll = norm.sum()
+        if best is None or ll > best[0]:
+            best = (ll, nk / n, means, covs, R, it)
+        R = np.exp(lp - norm[:, None])
+        dist = np.column_stack([np.sum((X - means[k]) @ np.linalg.inv(covs[k]) * (X - means[k]),
+                                       axis=1) for k in range(K)])
+        U = (dof + q) / (dof + dist)
+        if ll - prev <= tol * max(1.0, abs(ll)):
+            break
+        prev = ll
+    return best
+
+
+def test_fits_side_by_side_are_each_set_s_own_ecm():
+    """fit_many runs every start of every data set in one batch, each stopping on its own:
+    each set's fit is the plain ECM of its own data from its own start (written out per
+    component, scipy's t density), and with k-means starts the start kept is the plain loop's
+    best among those with two members per component."""
+    from mixture_ip_ros.core.kmeans import kmeans
+    rng = np.random.default_rng(8)
+    X = np.vstack([c + rng.normal(0, 0.4, (10, 3)) for c in rng.normal(0, 2, (3, 3))])
+    subsets = [np.sort(rng.choice(len(X), 24, replace=False)) for _ in range(4)]
+    starts = [np.eye(3)[rng.integers(3, size=24)] for _ in subsets]
+    mixture = PatternMixture(3, tol=1e-10)
+    fits = mixture.fit_many([X[s] for s in subsets], starts)
+    iterations = set()
+    for s, R, fit in zip(subsets, starts, fits):
+        ll, w, mu, cov, resp, it = _plain_ecm(X[s], R, 10.0, 1e-6 * X[s].var(axis=0), 4.0,
+                                              1e-10, 200)
+        iterations.add(it)
+        assert fit.n_iter_ == it
+        assert fit.log_likelihood_ == pytest.approx(ll, rel=1e-10)
+        assert np.allclose(fit.weights_, w, rtol=1e-9, atol=1e-12)
+        assert np.allclose(fit.means_, mu, rtol=1e-9, atol=1e-12)
+        assert np.allclose(fit.covariances_, cov, rtol=1e-9, atol=1e-12)
+        assert np.allclose(fit.resp_, resp, rtol=1e-9, atol=1e-12)
+    assert len(iterations) > 1                  # the runs did stop at different iterations
+    # k-means starts: the best of the plain runs.
+    fit = PatternMixture(3, n_init=5, tol=1e-10).fit(X)
+    seeds = np.random.default_rng(0).integers(2 ** 31, size=5)
+    runs = [_plain_ecm(X, np.eye(3)[kmeans(X, 3, random_state=int(seed), n_init=1)], 10.0,
+                       1e-6 * X.var(axis=0), 4.0, 1e-10, 200) for seed in seeds]
+    ok = [r for r in runs if np.bincount(np.argmax(r[4], axis=1), minlength=3).min() >= 2]
+    assert fit.log_likelihood_ == pytest.approx(max(r[0] for r in ok or runs), rel=1e-10)
+
+
+def test_k_means_runs_side_by_side_are_each_seed_s_own_run():
+    from mixture_ip_ros.core.kmeans import kmeans, kmeans_runs
+    rng = np.random.default_rng(9)
+    X = np.vstack([c + rng.normal(0, 0.8, (15, 2)) for c in ([0, 0], [3, 0], [1.5, 2.5])])
+    seeds = [11, 5, 2 ** 30, 7]
+    got = kmeans_runs(X, 4, seeds)
+    assert np.array_equal(got, [kmeans(X, 4, random_state=s, n_init=1) for s in seeds])
+    assert len({tuple(g) for g in got}) > 1     # the seeds found different partitions

@@ -8,25 +8,47 @@ def kmeans(X, n_clusters: int, random_state=0, n_init: int = 10, max_iter: int =
     Returns labels (n,).
 
     Every random draw is in the seeding, so the runs are seeded first, one after another, and
-    their Lloyd iterations then run side by side, each stopping on its own: when its labels
-    repeat (its means are its centres again) or its centres move less than np.allclose's
-    tolerance."""
+    their Lloyd iterations then run side by side (:func:`lloyd`)."""
     X = np.asarray(X, dtype=float)
-    n, dim = X.shape
-    K = int(n_clusters)
-    if K == 1:
-        return np.zeros(n, dtype=int)                    # what every run ends with
+    if int(n_clusters) == 1:
+        return np.zeros(len(X), dtype=int)               # what every run ends with
     rng = np.random.default_rng(random_state)
-    C = np.empty((n_init, K, dim))
-    for r in range(n_init):
-        C[r, 0] = X[rng.integers(n)]
-        d2 = np.sum((X - C[r, 0]) ** 2, axis=1)          # squared distance to the nearest centre
-        for k in range(1, K):
-            total = d2.sum()
-            C[r, k] = X[rng.choice(n, p=d2 / total if total > 0 else np.full(n, 1 / n))]
-            d2 = np.minimum(d2, np.sum((X - C[r, k]) ** 2, axis=1))
-    labels = np.full((n_init, n), -1)
-    active = np.arange(n_init)
+    labels, inertia = lloyd(X, np.stack([_seeded(X, int(n_clusters), rng)
+                                         for _ in range(n_init)]), max_iter)
+    return labels[int(np.argmin(inertia))]
+
+
+def kmeans_runs(X, n_clusters: int, seeds, max_iter: int = 100) -> np.ndarray:
+    """``kmeans(X, n_clusters, random_state=s, n_init=1)`` for every seed s, the runs side by
+    side: labels (len(seeds), n)."""
+    X = np.asarray(X, dtype=float)
+    if int(n_clusters) == 1:
+        return np.zeros((len(seeds), len(X)), dtype=int)
+    C = np.stack([_seeded(X, int(n_clusters), np.random.default_rng(s)) for s in seeds])
+    return lloyd(X, C, max_iter)[0]
+
+
+def _seeded(X, K, rng):
+    """k-means++ centres (K, dim) drawn with ``rng``."""
+    n = len(X)
+    C = np.empty((K, X.shape[1]))
+    C[0] = X[rng.integers(n)]
+    d2 = np.sum((X - C[0]) ** 2, axis=1)                # squared distance to the nearest centre
+    for k in range(1, K):
+        total = d2.sum()
+        C[k] = X[rng.choice(n, p=d2 / total if total > 0 else np.full(n, 1 / n))]
+        d2 = np.minimum(d2, np.sum((X - C[k]) ** 2, axis=1))
+    return C
+
+
+def lloyd(X, C, max_iter: int = 100):
+    """Lloyd iterations from every run's centres C (runs, K, dim), side by side, each stopping
+    on its own: when its labels repeat (its means are its centres again) or its centres move
+    less than np.allclose's tolerance. Returns (labels (runs, n), inertia (runs,))."""
+    C = np.array(C, dtype=float)
+    runs, n = len(C), len(X)
+    labels = np.full((runs, n), -1)
+    active = np.arange(runs)
     x2 = np.einsum('ij,ij->i', X, X)
     for _ in range(max_iter):
         if not active.size:
@@ -39,8 +61,8 @@ def kmeans(X, n_clusters: int, random_state=0, n_init: int = 10, max_iter: int =
         still = ~np.all(np.abs(newC - C[active]) <= 1e-8 + 1e-5 * np.abs(C[active]), axis=(1, 2))
         C[active[still]] = newC[still]
         active = active[still]
-    inertia = [np.sum((X - C[r][labels[r]]) ** 2) for r in range(n_init)]
-    return labels[int(np.argmin(inertia))]
+    inertia = np.array([np.sum((X - C[r][labels[r]]) ** 2) for r in range(runs)])
+    return labels, inertia
 
 
 def _nearest_centres(X, x2, C):

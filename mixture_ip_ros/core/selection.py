@@ -22,7 +22,7 @@ from .demonstration import Demonstration
 from .interaction import trajectory_distribution
 from .mixture import MixtureIProMP, Prepared
 from .numerics import first_best, logsumexp_rows, tie_tolerance
-from .online import prefix_predictions
+from .online import OnlineEstimator, prefix_predictions
 from .phase import alpha_log_density
 from .promp import ObservationStats, log_evidence, observation_stats, stack_stats
 
@@ -161,19 +161,24 @@ def _final_rms(model, view: _FinalView, idx) -> np.ndarray:
     return out
 
 
-def online_rms(model, demo: Demonstration, fractions=None, n_alpha: int = 50,
-               min_interval: float = 0.05) -> float:
-    """How well ``model`` predicts ``demo``'s controlled agent online, as the estimator node
-    does: after the first f T of the observed agent (phase unknown) for each ``fraction`` f
-    (default COMPLETION_FRACTIONS), the MAP component's expected path of the controlled agent
+def online_rms(model, demos, fractions=None, n_alpha: int = 50,
+               min_interval: float = 0.05) -> np.ndarray:
+    """How well ``model`` predicts each of ``demos``' controlled agent online, as the estimator
+    node does: after the first f T of the observed agent (phase unknown) for each ``fraction``
+    f (default COMPLETION_FRACTIONS), the MAP component's expected path of the controlled agent
     over the rest of the movement (core.online.prefix_predictions); the RMS error over the
-    rest's samples and DOFs, averaged over the fractions. NaN when nothing is left to predict
-    at any fraction."""
+    rest's samples and DOFs, averaged over the fractions. (len(demos),), NaN for a
+    demonstration with nothing left to predict at any fraction."""
     fractions = checked_fractions(COMPLETION_FRACTIONS if fractions is None else fractions)
-    errors = [np.sqrt(np.mean((pred - demo.controlled[rest]) ** 2))
-              for _, pred, rest in prefix_predictions(model, demo, fractions, n_alpha,
-                                                      min_interval) if pred is not None]
-    return float(np.mean(errors)) if errors else np.nan
+    est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval)
+    out = np.full(len(demos), np.nan)
+    for i, demo in enumerate(demos):
+        errors = [np.sqrt(np.mean((pred - demo.controlled[rest]) ** 2))
+                  for _, pred, rest in prefix_predictions(est, demo, fractions)
+                  if pred is not None]
+        if errors:
+            out[i] = np.mean(errors)
+    return out
 
 
 def score_completion(model, demonstrations, fractions=None):
@@ -284,8 +289,8 @@ def _heldout_scores(demonstrations, candidates, scales, n_folds, progress, fold_
                 model.fit(train, init=init)
                 out['loglik'][b, a, test] = model.score_statistics(test_stats, data.alphas[test])
                 if 'controlled_rms' in out:
-                    out['controlled_rms'][b, a, test] = [online_rms(model, demos[i])
-                                                         for i in test]
+                    out['controlled_rms'][b, a, test] = online_rms(model,
+                                                                   [demos[i] for i in test])
                 if fractions:
                     density, rms = completion_statistics(model, 
                         test_stats, [st.take(test) for st in beginnings],

@@ -12,13 +12,13 @@ import time
 
 import numpy as np
 
-from mixture_ip_ros.app.evaluation.common import (REPORT_FRACTIONS, EvalConfig, feed_until,
+from mixture_ip_ros.app.evaluation.common import (REPORT_FRACTIONS, EvalConfig,
                                                   fold_indices, last_observed_row,
                                                   loo_by_components, majority_labels, prepare,
                                                   rms_vs_k_dict, trained, with_default_noise)
 from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.selection import select_n_components
-from mixture_ip_ros.core.online import OnlineEstimator
+from mixture_ip_ros.core.online import OnlineEstimator, feed_until, observed_rows
 from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE
 from mixture_ip_ros.robot.kinematics import RobotKinematics
 from mixture_ip_ros.viz import plots
@@ -79,7 +79,7 @@ def evaluate_box_assembly(demos, out_dir: Path, config: EvalConfig = None,
         posteriors.append(post)
         # Online: the first x % of the wrist stream, phase unknown.
         est = OnlineEstimator(model, n_alpha=config.n_alpha, min_interval=config.min_interval)
-        rows = np.flatnonzero(~np.isnan(test.observed).any(axis=1))
+        rows = observed_rows(test)
         j = 0
         for c, f in enumerate(fractions):
             j = feed_until(est, test, rows, j, f * test.duration)

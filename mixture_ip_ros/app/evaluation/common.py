@@ -19,7 +19,7 @@ from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.core.interaction import trajectory_distribution
 from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.selection import controlled_rms
-from mixture_ip_ros.core.online import OnlineEstimator, spaced
+from mixture_ip_ros.core.online import OnlineEstimator, feed_until, observed_rows, spaced
 
 logger = logging.getLogger(__name__)
 
@@ -77,7 +77,7 @@ def fold_indices(n: int, stride: int) -> np.ndarray:
 
 
 def last_observed_row(demo) -> int:
-    rows = np.flatnonzero(~np.isnan(demo.observed).any(axis=1))
+    rows = observed_rows(demo)
     return int(rows[-1])
 
 
@@ -130,14 +130,6 @@ def observed_prediction(est: OnlineEstimator, t, with_cov: bool = False):
     return d['position'], d['position_cov'], a
 
 
-def feed_until(est, demo, rows, j, t_max):
-    """Feed the observed rows with t <= t_max, starting at rows[j]; returns the next j."""
-    while j < len(rows) and demo.t[rows[j]] <= t_max + 1e-9:
-        est.update(float(demo.t[rows[j]]), demo.observed[rows[j]])
-        j += 1
-    return j
-
-
 def trained(demos, config: EvalConfig, **kwargs):
     """(model, training summary): what ``training.train`` ships for ``demos`` with the
     evaluation's model settings and K candidates (K chosen as training chooses it, its
@@ -156,7 +148,7 @@ def online_components(model, demo, fractions, n_alpha=50, min_interval=0.05, **s
     fed ``demo`` sample by sample, phase unknown, after each fraction of the movement.
     ``settings``: further OnlineEstimator arguments (e.g. alpha_range_std)."""
     est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval, **settings)
-    rows = np.flatnonzero(~np.isnan(demo.observed).any(axis=1))
+    rows = observed_rows(demo)
     out, j = [], 0
     for f in fractions:
         j = feed_until(est, demo, rows, j, f * demo.duration)
@@ -169,7 +161,7 @@ def online_component_given_end(model, demo, n_alpha=50, min_interval=0.05):
     sample by sample (phase unknown) and is told when it ended (the observer's 'end' event, at
     its last sample): OnlineEstimator.end_posterior, where the phase is 1."""
     est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval)
-    rows = np.flatnonzero(~np.isnan(demo.observed).any(axis=1))
+    rows = observed_rows(demo)
     feed_until(est, demo, rows, 0, demo.duration)
     return int(np.argmax(est.end_posterior(float(demo.t[rows[-1]]))))
 
@@ -190,7 +182,7 @@ def phase_known_components(model, demo, fractions, min_interval=0.05, duration=T
     known, hence also alpha = 1/T and (``duration``) its evidence p(alpha | k). The samples are
     the ones the online estimator absorbs (``min_interval``), so phase known and unknown differ
     in the phase only."""
-    rows = np.flatnonzero(~np.isnan(demo.observed).any(axis=1))
+    rows = observed_rows(demo)
     rows = rows[decimated_rows(demo.t[rows], min_interval)]
     out = []
     for f in fractions:

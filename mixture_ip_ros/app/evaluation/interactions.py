@@ -42,7 +42,7 @@ import numpy as np
 from mixture_ip_ros.app.evaluation.baselines import NearestNeighbour, clustering_baselines
 from mixture_ip_ros.app.evaluation.common import (EvalConfig, majority_labels,
                                                   phase_known_components, trained)
-from mixture_ip_ros.core.online import prefix_predictions
+from mixture_ip_ros.core.online import OnlineEstimator, prefix_predictions
 from mixture_ip_ros.viz import plots
 
 FRACTIONS = (0.3, 0.5, 0.7, 1.0)
@@ -131,9 +131,9 @@ def _fold(demos, labels, fold, config: EvalConfig, seed: int, f: int) -> dict:
         right['phase_known'][r] = [names[k] == labels[i] for k in phase_known_components(
             model, demos[i], fractions, config.min_interval)]
     for m, (mod, nm) in namers.items():
+        est = OnlineEstimator(mod, n_alpha=config.n_alpha, min_interval=config.min_interval)
         for r, i in enumerate(test_i):
-            for c, (k, pred, rest) in enumerate(prefix_predictions(
-                    mod, demos[i], fractions, config.n_alpha, config.min_interval)):
+            for c, (k, pred, rest) in enumerate(prefix_predictions(est, demos[i], fractions)):
                 right[m][r, c] = nm[k] == labels[i]
                 if pred is not None and has_partner:
                     rms[m][r, c], final[m][r, c] = _errors(pred, demos[i].controlled[rest])

@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 from scipy import linalg
 
-from mixture_ip_ros.app.evaluation.common import (EvalConfig, feed_until, observed_prediction,
+from mixture_ip_ros.app.evaluation.common import (EvalConfig, observed_prediction,
                                                   trained, with_default_noise)
 from mixture_ip_ros.core.mixture import MixtureIProMP
-from mixture_ip_ros.core.online import OnlineEstimator
+from mixture_ip_ros.core.online import OnlineEstimator, feed_until, observed_rows
 from mixture_ip_ros.core.promp import observation_stats, weight_posterior
 from mixture_ip_ros.scenarios.letters import LETTER_OBSERVATION_NOISE
 from mixture_ip_ros.viz import plots
@@ -36,7 +36,7 @@ def letter_completion(model, test, fractions, n_alpha=50, min_interval=0.05, kee
     complete the letter. Returns RMS (len(fractions),), MAP alpha (len(fractions),), and for the
     fractions in ``keep`` a snapshot {fraction: (pred mean, pred cov, alpha posterior)}."""
     est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval)
-    rows = np.flatnonzero(~np.isnan(test.observed).any(axis=1))
+    rows = observed_rows(test)
     n = test.t.size
     rms = np.full(len(fractions), np.nan)
     alpha = np.full(len(fractions), np.nan)
