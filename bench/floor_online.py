@@ -59,7 +59,8 @@ def main():
             est = OnlineEstimator(model, n_alpha=config.n_alpha,
                                   min_interval=config.min_interval)
             for i in test_i:
-                for c, (k, pred, rest) in enumerate(prefix_predictions(est, demos[i], FRACTIONS)):
+                for c, (k, pred, rest, _) in enumerate(prefix_predictions(est, demos[i],
+                                                                     FRACTIONS)):
                     right[key][i, c] = names[k] == labels[i]
                     if pred is not None:
                         rms[key][i, c] = _errors(pred, demos[i].controlled[rest])[0]

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mixture_ip_ros.app.cli import main
-from mixture_ip_ros.app.evaluation.interactions import stratified_folds
+from mixture_ip_ros.app.evaluation.interactions import _at_contact, contact_row, stratified_folds
 from mixture_ip_ros.core.demonstration import Layout
 from mixture_ip_ros.io.csv_files import write_csv_demonstration
 from mixture_ip_ros.scenarios.synthetic import mixture_demos
@@ -21,7 +21,9 @@ KEYS = ('n_components_selected', 'ari', 'heldout_ari', 'recognition_accuracy_by_
         'baseline_nn_partner_rms_cm_by_fraction', 'single_partner_rms_cm_by_fraction',
         'supervised_partner_rms_cm_by_fraction', 'supervised_accuracy_by_fraction',
         'true_k_accuracy_by_fraction', 'phase_known_accuracy_by_fraction',
-        'recognition_accuracy_by_interaction')
+        'recognition_accuracy_by_interaction', 'partner_contact_cm_by_fraction',
+        'baseline_nn_partner_contact_cm_by_fraction', 'phase_error_by_fraction',
+        'people_contact_distance_cm')
 
 
 def test_folds_hold_every_label_in_proportion():
@@ -99,6 +101,24 @@ def nuisi_v2(tmp_path_factory):
     return out, evaluate_nuisi(out, interactions_config(quick=True), versions=('v2',))['v2']
 
 
+def test_the_contact_is_where_the_two_agents_are_closest():
+    """Two hands moving towards each other along x meet at t = 0.5 (sample 5); with that
+    sample of the partner lost, the closest recorded one is the first of its neighbours. The
+    error there counts only if the contact is still to come."""
+    from mixture_ip_ros.core.demonstration import Demonstration
+    t = np.linspace(0.0, 1.0, 11)
+    zero = np.zeros_like(t)
+    observed, controlled = np.column_stack([t, zero, zero]), np.column_stack([1 - t, zero, zero])
+    assert contact_row(Demonstration(t, observed, controlled)) == 5
+    controlled[5] = np.nan
+    assert contact_row(Demonstration(t, observed, controlled)) == 4
+    assert contact_row(Demonstration(t, observed, controlled[:, :2])) is None
+    rest = np.arange(3, 11)
+    pred = controlled[rest] + [0.0, 0.03, 0.04]
+    assert _at_contact(pred, rest, 4, controlled) == pytest.approx(0.05)
+    assert np.isnan(_at_contact(pred[2:], rest[2:], 4, controlled))
+
+
 @pytest.mark.decision
 def test_the_four_interactions_of_real_people_are_found_without_labels(nuisi_v2):
     out, m = nuisi_v2
@@ -116,6 +136,11 @@ def test_the_four_interactions_of_real_people_are_found_without_labels(nuisi_v2)
     assert m['recognition_accuracy_by_fraction']['0.5'] >= 0.9
     assert m['true_k_accuracy_by_fraction']['0.5'] >= 0.9
     assert m['supervised_accuracy_by_fraction']['0.5'] >= 0.9
+    # the contact and the phase, measured (issue 32 sets the aims): finite where the contact
+    # is still to come, and a phase within half a movement
+    assert 0 < m['partner_contact_cm_by_fraction']['0.3'] < 100
+    assert 0 < m['people_contact_distance_cm'] < 50
+    assert all(0 <= e < 0.5 for e in m['phase_error_by_fraction'].values())
     rms = m['partner_rms_cm_by_fraction']['0.5']
     assert rms < m['single_partner_rms_cm_by_fraction']['0.5']
     assert rms < m['baseline_nn_partner_rms_cm_by_fraction']['0.5']

@@ -105,14 +105,17 @@ def held_out_statistics(model, demos, *, n_alpha: int, min_interval: float,
                         window_size: int = WINDOW):
     """Prefix statistics per n (list of arrays over demonstrations, n = 1..) and every window
     statistic, of ``demos`` fed through an OnlineEstimator of ``model`` (the online way)."""
-    from mixture_ip_ros.core.online import OnlineEstimator
+    from mixture_ip_ros.core.online import OnlineEstimator, observed_rows
     prefix, windows = {}, []
+    est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval)
     for demo in demos:
-        est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval)
+        est.reset()
         monitor = NoveltyMonitor(NoveltyThresholds(np.zeros(1), 0.0, window_size, min_interval))
-        ok = ~np.isnan(demo.observed).any(axis=1)
-        for t, y in zip(demo.t[ok], demo.observed[ok]):
-            if est.update(float(t), y):
+        for row in observed_rows(demo):
+            t = float(demo.t[row])
+            # a sample within min_interval of the last one used is skipped, as update would
+            if est.admit(t):
+                est.absorb(t, demo.observed[row])
                 monitor.record(est.n_observations, est.log_marginal())
                 p, w = monitor.statistics()
                 prefix.setdefault(est.n_observations, []).append(p)

@@ -10,6 +10,8 @@ component. The controlled agent is recovered exactly only when asked for: since 
 on the observed weights alone, w_c | D follows from w_o | D through B_k = Sigma_co Sigma_oo^-1.
 """
 
+from typing import NamedTuple
+
 import numpy as np
 from scipy import linalg
 
@@ -592,14 +594,23 @@ def speed_log_scores(model, demonstrations, weights=SPEED_WEIGHTS, fractions=SPE
     return total, n
 
 
-def prefix_predictions(est, demo, fractions):
+class Prefix(NamedTuple):
+    """What :func:`prefix_predictions` makes of one beginning of a recording."""
+
+    component: int          # the MAP component k*
+    controlled: object      # its expected controlled path at ``rest`` (m, Q), None if m = 0
+    rest: np.ndarray        # the samples after the beginning with the controlled agent recorded
+    alpha: float            # k*'s MAP phase speed (1/s): the phase estimated at t is alpha t
+
+
+def prefix_predictions(est, demo, fractions) -> list:
     """What the estimator node makes of ``demo`` from its beginning, the phase unknown: the
     OnlineEstimator ``est``, reset, fed the observed agent sample by sample and, after the
-    first f T of the movement for each of the increasing ``fractions``, (the MAP component k*,
-    the controlled agent's expected path under it (:meth:`OnlineEstimator.expected_controlled`)
-    at the samples after f T where it was recorded (m, Q), or None where there are none, their
-    rows). One estimator serves every recording of a model (building one is most of the cost
-    of a short recording)."""
+    first f T of the movement for each of the increasing ``fractions``, a :class:`Prefix`:
+    the MAP component, the controlled agent's expected path under it
+    (:meth:`OnlineEstimator.expected_controlled`) at the samples after f T where it was
+    recorded, and the MAP phase speed. One estimator serves every recording of a model
+    (building one is most of the cost of a short recording)."""
     est.reset()
     rows = observed_rows(demo)
     recorded = ~np.isnan(demo.controlled).any(axis=1)
@@ -607,7 +618,7 @@ def prefix_predictions(est, demo, fractions):
     for f in fractions:
         j = feed_until(est, demo, rows, j, f * demo.duration)
         rest = np.flatnonzero((demo.t > f * demo.duration + 1e-9) & recorded)
-        k = est.map_hypothesis()[0]
+        k, alpha = est.map_hypothesis()
         pred = est.expected_controlled(demo.t[rest], component=k)[1] if rest.size else None
-        out.append((int(k), pred, rest))
+        out.append(Prefix(int(k), pred, rest, float(alpha)))
     return out

@@ -173,9 +173,8 @@ def online_rms(model, demos, fractions=None, n_alpha: int = 50,
     est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval)
     out = np.full(len(demos), np.nan)
     for i, demo in enumerate(demos):
-        errors = [np.sqrt(np.mean((pred - demo.controlled[rest]) ** 2))
-                  for _, pred, rest in prefix_predictions(est, demo, fractions)
-                  if pred is not None]
+        errors = [np.sqrt(np.mean((p.controlled - demo.controlled[p.rest]) ** 2))
+                  for p in prefix_predictions(est, demo, fractions) if p.controlled is not None]
         if errors:
             out[i] = np.mean(errors)
     return out

@@ -94,6 +94,37 @@ def _errors(pred, truth):
     return float(np.sqrt(np.mean(d ** 2))), float(d[-1])
 
 
+def contact_row(demo):
+    """The sample where the two agents' positions are closest (the recorded contact of a
+    handshake or a fist bump, the closest approach of the others), among those where both are
+    recorded; None without a controlled agent of the observed one's dimension."""
+    if demo.n_controlled_dofs != demo.n_observed_dofs:
+        return None
+    both = np.flatnonzero(~np.isnan(demo.observed).any(axis=1)
+                          & ~np.isnan(demo.controlled).any(axis=1))
+    if not both.size:
+        return None
+    gap = np.linalg.norm(demo.observed[both] - demo.controlled[both], axis=1)
+    return int(both[np.argmin(gap)])
+
+
+def _people_contact_distance(demos, unit):
+    """The two recorded agents' mean distance at their contact (:func:`contact_row`), None
+    where no recording has one."""
+    gaps = [np.linalg.norm(d.observed[row] - d.controlled[row]) for d in demos
+            for row in [contact_row(d)] if row is not None]
+    return float(unit * np.mean(gaps)) if gaps else None
+
+
+def _at_contact(pred, rest, row, truth):
+    """The prediction's error at the contact sample ``row`` if it is among ``rest`` (the
+    samples predicted), else NaN (the contact was already observed)."""
+    where = np.flatnonzero(rest == row) if row is not None else ()
+    if not len(where):
+        return np.nan
+    return float(np.linalg.norm(pred[where[0]] - truth[row]))
+
+
 def _fold(demos, labels, fold, config: EvalConfig, seed: int, f: int) -> dict:
     """Fold ``f`` of :func:`evaluate_labelled`: the models trained on the other folds, every
     method's results on this fold's recordings (their rows), the fold's summary, the mixture's
@@ -109,6 +140,9 @@ def _fold(demos, labels, fold, config: EvalConfig, seed: int, f: int) -> dict:
     right = {m: np.zeros(shape, dtype=bool) for m in METHODS}
     rms = {m: np.full(shape, np.nan) for m in METHODS}
     final = {m: np.full(shape, np.nan) for m in METHODS}
+    contact = {m: np.full(shape, np.nan) for m in METHODS}
+    phase_error = np.full(shape, np.nan)
+    contacts = [contact_row(demos[i]) for i in test_i]
     examples, timings = {}, {}
     t0 = time.perf_counter()
     model, info = trained(train, config, random_state=seed)
@@ -133,10 +167,15 @@ def _fold(demos, labels, fold, config: EvalConfig, seed: int, f: int) -> dict:
     for m, (mod, nm) in namers.items():
         est = OnlineEstimator(mod, n_alpha=config.n_alpha, min_interval=config.min_interval)
         for r, i in enumerate(test_i):
-            for c, (k, pred, rest) in enumerate(prefix_predictions(est, demos[i], fractions)):
+            for c, (k, pred, rest, alpha) in enumerate(
+                    prefix_predictions(est, demos[i], fractions)):
                 right[m][r, c] = nm[k] == labels[i]
+                if m == 'mixture':
+                    # against the recording's own progress t / T at the prefix's end
+                    phase_error[r, c] = fractions[c] * abs(alpha * demos[i].duration - 1.0)
                 if pred is not None and has_partner:
                     rms[m][r, c], final[m][r, c] = _errors(pred, demos[i].controlled[rest])
+                    contact[m][r, c] = _at_contact(pred, rest, contacts[r], demos[i].controlled)
                     if m == 'mixture' and abs(fractions[c] - 0.5) < 1e-9:
                         examples.setdefault(labels[i], (i, rest, pred, nm[k]))
     timings['online_s'] = time.perf_counter() - t0
@@ -154,6 +193,7 @@ def _fold(demos, labels, fold, config: EvalConfig, seed: int, f: int) -> dict:
             right['nearest'][r, c] = label == labels[i]
             if rest.size and has_partner:
                 rms['nearest'][r, c], final['nearest'][r, c] = _errors(pred, d.controlled[rest])
+                contact['nearest'][r, c] = _at_contact(pred, rest, contacts[r], d.controlled)
     timings['baselines_s'] = time.perf_counter() - t0
     summary = {'n_components': int(info['n_components']),
                'prior_scale': info['prior_scale'],
@@ -165,8 +205,9 @@ def _fold(demos, labels, fold, config: EvalConfig, seed: int, f: int) -> dict:
                'component_labels': names,
                'baseline_kmeans_ari': clustering['kmeans'],
                'baseline_gmm_pca_ari': clustering['gmm_pca']}
-    return {'rows': test_i, 'right': right, 'rms': rms, 'final': final, 'fold': summary,
-            'examples': examples, 'timings': timings}
+    return {'rows': test_i, 'right': right, 'rms': rms, 'final': final, 'contact': contact,
+            'phase_error': phase_error, 'fold': summary, 'examples': examples,
+            'timings': timings}
 
 
 def _fold_tasks(demos, config: EvalConfig, seed: int) -> list:
@@ -220,12 +261,16 @@ def _metrics(demos, results, out_dir: Path, config: EvalConfig, name: str, cm: b
     right = {m: np.zeros((len(demos), len(fractions)), dtype=bool) for m in METHODS}
     rms = {m: np.full((len(demos), len(fractions)), np.nan) for m in METHODS}
     final = {m: np.full((len(demos), len(fractions)), np.nan) for m in METHODS}
+    contact = {m: np.full((len(demos), len(fractions)), np.nan) for m in METHODS}
+    phase_error = np.full((len(demos), len(fractions)), np.nan)
     per_fold, examples = [], {}
     timings = {'training_s': 0.0, 'online_s': 0.0, 'baselines_s': 0.0}
     for r in results:
         for m in METHODS:
             right[m][r['rows']], rms[m][r['rows']] = r['right'][m], r['rms'][m]
             final[m][r['rows']] = r['final'][m]
+            contact[m][r['rows']] = r['contact'][m]
+        phase_error[r['rows']] = r['phase_error']
         per_fold.append(r['fold'])
         for lbl, (i, rest, pred, named) in r['examples'].items():
             examples.setdefault(lbl, (demos[i], rest, pred, named))
@@ -250,6 +295,7 @@ def _metrics(demos, results, out_dir: Path, config: EvalConfig, name: str, cm: b
         'supervised_accuracy_by_fraction': accuracy['supervised'],
         'true_k_accuracy_by_fraction': accuracy['true_k'],
         'phase_known_accuracy_by_fraction': accuracy['phase_known'],
+        'phase_error_by_fraction': by_fraction(phase_error),
         'recognition_accuracy_by_interaction': {
             c: {k: float(right['mixture'][labels == c, j].mean()) for j, k in enumerate(keys)}
             for c in classes},
@@ -268,7 +314,13 @@ def _metrics(demos, results, out_dir: Path, config: EvalConfig, name: str, cm: b
             f'supervised_partner_rms_{err_unit}_by_fraction': by_fraction(rms['supervised'],
                                                                           unit),
             f'supervised_partner_final_{err_unit}_by_fraction': by_fraction(final['supervised'],
-                                                                            unit)})
+                                                                            unit),
+            **{f'{prefix}partner_contact_{err_unit}_by_fraction': by_fraction(contact[m], unit)
+               for m, prefix in (('mixture', ''), ('nearest', 'baseline_nn_'),
+                                 ('single', 'single_'), ('supervised', 'supervised_'))},
+            'contact_observed_share_by_fraction': {
+                k: float(np.mean(np.isnan(contact['mixture'][:, c]))) for c, k in enumerate(keys)},
+            f'people_contact_distance_{err_unit}': _people_contact_distance(demos, unit)})
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     chance = max(np.mean(labels == c) for c in classes)
@@ -297,7 +349,12 @@ def _metrics(demos, results, out_dir: Path, config: EvalConfig, name: str, cm: b
                         'accuracy': 'fraction of held-out recordings (all folds)',
                         'partner': f'{err_unit}: RMS of the controlled agent over the samples '
                                    'after the observed fraction, and its error at the last '
-                                   'one, mean over held-out recordings (no rest after 100 %)',
+                                   'one, mean over held-out recordings (no rest after 100 %); '
+                                   'at the contact (the samples where the two agents are '
+                                   'closest), mean over the recordings whose contact comes '
+                                   'after the observed fraction',
+                        'phase_error': 'the estimated phase alpha* f T against the progress f '
+                                       'at the prefix\'s end, mean absolute',
                         'chance': 'the largest interaction share'}
     metrics['chance_accuracy'] = float(chance)
     metrics['config'] = config.to_dict()
