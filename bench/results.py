@@ -237,9 +237,22 @@ def page(R: dict) -> str:
                 ('partner at the end, mixture', lambda m: cm(m['partner_final_cm_by_fraction'])),
                 ('partner at the end, nearest neighbour',
                  lambda m: cm(m['baseline_nn_partner_final_cm_by_fraction'])),
+                ('partner at the contact (hands closest; people '
+                 '{people}), mixture', lambda m: cm(m['partner_contact_cm_by_fraction'])),
+                ('partner at the contact, supervised',
+                 lambda m: cm(m['supervised_partner_contact_cm_by_fraction'])),
+                ('partner at the contact, nearest neighbour',
+                 lambda m: cm(m['baseline_nn_partner_contact_cm_by_fraction'])),
+                ('contact already observed',
+                 lambda m: fractions(m['contact_observed_share_by_fraction']) + ' %'),
+                ('phase error |alpha* f T - f|, mixture',
+                 lambda m: ' / '.join(f'{v:.3f}' for v in
+                                      list(m['phase_error_by_fraction'].values())[:3])),
                 ('speed weight per fold (training calibrates it)',
                  lambda m: ', '.join(f"{p['speed_weight']:g}" for p in m['folds']))]
-        L += [f'| {name} | {f(v1)} | {f(v2)} |' for name, f in rows] + ['']
+        people = ' / '.join(f"{m['people_contact_distance_cm']:.1f}" for m in (v1, v2))
+        L += [f'| {name.format(people=people + " cm")} | {f(v1)} | {f(v2)} |'
+              for name, f in rows] + ['']
     L += robustness_section(R.get('robustness'), R.get('cpu_kernels'))
     demos = [(r, R.get(f'demo_{r}')) for r in ROBOTS]
     if any(d for _, d in demos):
@@ -262,8 +275,9 @@ def page(R: dict) -> str:
         L += ['## The robot takes a person\'s part (`mixture-ip demo --scenario interactions`, '
               'NuiSI v2\'s 11 held-out recordings, iiwa)', '',
               '| model | right interaction | committed (mean) | flange to partner after '
-              'commitment, RMS: loop / offline | tracking RMS, max | refused | beyond limits |',
-              '|---|---|---|---|---|---|---|']
+              'commitment, RMS: loop / offline | at the end: loop / offline | at the contact, '
+              'flange / partner to person 1 | tracking RMS, max | refused | beyond limits |',
+              '|---|---|---|---|---|---|---|---|---|']
         for run_ in ints['runs']:
             if 'model' not in run_ or 'right' not in run_:
                 continue
@@ -271,6 +285,10 @@ def page(R: dict) -> str:
                      f"{run_['right']}/{run_['n']} | {pct(run_['commit_fraction_mean'])} | "
                      f"{run_['flange_to_partner_rms_cm_mean']:.1f} / "
                      f"{run_['offline_rms_cm_mean']:.1f} cm | "
+                     f"{run_['flange_to_partner_end_cm_mean']:.1f} / "
+                     f"{run_['offline_end_cm_mean']:.1f} cm | "
+                     f"{run_['flange_to_person1_at_contact_cm_mean']:.1f} / "
+                     f"{run_['people_at_contact_cm_mean']:.1f} cm | "
                      f"{run_['tracking_rms_mrad_max']:.3f} mrad | "
                      f"{run_['refused_trajectories']} | {run_['points_beyond_limits']} |")
         L.append('')

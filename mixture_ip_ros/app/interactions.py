@@ -7,7 +7,9 @@ bag through the running nodes (bag_player -> observer -> estimator -> sim, on si
 and the arm answers. Per interaction: the interaction chosen and when, the flange's distance to
 where the partner's hand was (in the base frame) from the commitment to the end of the
 movement (RMS) and once all is over, beside the same model's offline prediction of the same
-(OnlineEstimator fed the movement up to the same fraction, phase unknown), the tracking error,
+(OnlineEstimator fed the movement up to the same fraction, phase unknown); the flange's
+distance from person 1's hand at the recorded contact (where the two people's hands were
+closest) beside the people's own distance there; the tracking error,
 refused trajectories, commanded points beyond the arm's limits and non-finite commands.
 """
 
@@ -131,15 +133,23 @@ def _last(path) -> np.ndarray:
 
 def loop_errors(record, scene, recording) -> dict:
     """The flange's distance from where the partner's hand was, from the commitment to the end
-    of the movement (the observer's 'end', else the recording's last frame): RMS; and once the
-    run is over against the partner's last position (cm); with the replay's offset (s)."""
+    of the movement (the observer's 'end', else the recording's last frame): RMS; once the run
+    is over against the partner's last position; at the recorded contact
+    (scenarios.interactions.contact) from person 1's hand, beside the two people's own distance
+    there (cm); with the replay's offset (s)."""
     offset = replay_offset(record, scene, recording)
     pt, partner = interactions.partner_hand(recording, scene)
     before, _ = interactions.replay_frames(recording, scene.config)
     end = (record.end_time - offset if record.end_time is not None
            else pt[before + len(recording.t) - 1])
+    t_contact, person1, person2 = interactions.contact(recording, scene)
+    flange = np.asarray(record.flange, dtype=float)
+    at_contact = np.array([np.interp(t_contact + offset, record.t, flange[:, j])
+                           for j in range(3)])
     out = {'offset': offset,
-           'end_cm': float(100 * np.linalg.norm(record.flange[-1] - _last(partner)))}
+           'end_cm': float(100 * np.linalg.norm(record.flange[-1] - _last(partner))),
+           'contact_cm': float(100 * np.linalg.norm(at_contact - person1)),
+           'people_contact_cm': float(100 * np.linalg.norm(person2 - person1))}
     if record.commit_time is None:
         return {**out, 'rms_cm': None}
     t = np.asarray(record.t) - offset
@@ -265,6 +275,8 @@ def run_one(loop, scene, model, bag, recording):
                         else rec.commit_time - rec.onset_time),
            'flange_to_partner_rms_cm': errors['rms_cm'],
            'flange_to_partner_end_cm': errors['end_cm'],
+           'flange_to_person1_at_contact_cm': errors['contact_cm'],
+           'people_at_contact_cm': errors['people_contact_cm'],
            'tracking_rms_mrad': rms, 'tracking_max_mrad': worst,
            'refused_trajectories': loop.sim.rejection_count - refused_before,
            'points_beyond_limits': beyond_limits(rec, scene.kin),
@@ -285,7 +297,9 @@ def _line(row) -> str:
             f'{num(row["flange_to_partner_rms_cm"], "5.1f")} cm (offline '
             f'{num(row.get("offline_rms_cm"), "5.1f")}), at the end '
             f'{num(row["flange_to_partner_end_cm"], "5.1f")} cm (offline '
-            f'{num(row.get("offline_end_cm"), "5.1f")}); tracking '
+            f'{num(row.get("offline_end_cm"), "5.1f")}); at the contact '
+            f'{num(row["flange_to_person1_at_contact_cm"], "5.1f")} cm from person 1 (the '
+            f'people {num(row["people_at_contact_cm"], "4.1f")}); tracking '
             f'{num(row["tracking_rms_mrad"], ".3f")} mrad; refused '
             f'{row["refused_trajectories"]}, beyond limits {row["points_beyond_limits"]}')
 
@@ -301,6 +315,8 @@ def summary(rows, info) -> dict:
             'offline_rms_cm_mean': mean('offline_rms_cm'),
             'flange_to_partner_end_cm_mean': mean('flange_to_partner_end_cm'),
             'offline_end_cm_mean': mean('offline_end_cm'),
+            'flange_to_person1_at_contact_cm_mean': mean('flange_to_person1_at_contact_cm'),
+            'people_at_contact_cm_mean': mean('people_at_contact_cm'),
             'tracking_rms_mrad_max': max((r['tracking_rms_mrad'] for r in rows
                                           if r['tracking_rms_mrad'] is not None), default=None),
             'refused_trajectories': int(sum(r['refused_trajectories'] for r in rows)),

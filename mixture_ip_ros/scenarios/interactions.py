@@ -285,6 +285,19 @@ def partner_hand(recording, scene: Scene) -> tuple:
     return np.arange(len(xyz)) / recording.rate, scene.partner_to_base(xyz)
 
 
+def contact(recording, scene: Scene) -> tuple:
+    """The recorded contact, the frame where the two people's hands were closest (the grip of
+    a handshake, a fist bump; the closest approach of a wave): (its time (s) on the replay's
+    time base, person 1's hand, the partner's hand, both in the base frame)."""
+    h1, ok1 = _hands(recording, 1, scene.config.data)
+    h2, ok2 = _hands(recording, 2, scene.config.data)
+    both = np.flatnonzero(ok1 & ok2)
+    p1, p2 = scene.person1_to_base(h1[both]), scene.partner_to_base(h2[both])
+    i = int(np.argmin(np.linalg.norm(p1 - p2, axis=1)))
+    before, _ = replay_frames(recording, scene.config)
+    return (before + both[i]) / recording.rate, p1[i], p2[i]
+
+
 def person1_stream(recording, scene: Scene) -> tuple:
     """Person 1's hand as replayed to the nodes: (t (n,) s, xyz (n, 3) in the mocap frame): the
     recording as it is, glitches included, with the first and last samples a hand can have made
