@@ -245,7 +245,7 @@ def page(R: dict) -> str:
                  lambda m: cm(m['baseline_nn_partner_contact_cm_by_fraction'])),
                 ('contact already observed',
                  lambda m: fractions(m['contact_observed_share_by_fraction']) + ' %'),
-                ('phase error |alpha* f T - f|, mixture',
+                ('phase error (alpha* f T against f), mixture',
                  lambda m: ' / '.join(f'{v:.3f}' for v in
                                       list(m['phase_error_by_fraction'].values())[:3])),
                 ('speed weight per fold (training calibrates it)',

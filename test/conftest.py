@@ -59,3 +59,19 @@ def heldout_loglik(demos, candidates, prior_scales=None, **params):
     scales = PRIOR_SCALES if prior_scales is None else prior_scales
     return calibrated_heldout_curves(demos, candidates, (), scales, controlled=False,
                                      **params)['loglik']
+
+
+@pytest.fixture
+def nothing_runs(monkeypatch):
+    """Reading data, training or evaluating fails the test: a check must have stopped first."""
+    import mixture_ip_ros.app.evaluation as evaluation
+    import mixture_ip_ros.app.training as training
+    import mixture_ip_ros.io.csv_files as csv_files
+    import mixture_ip_ros.io.dataset as dataset
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError('reached data loading or training despite contradicting options')
+    for module, name in ((training, 'train_to_file'), (evaluation, 'evaluate'),
+                         (evaluation, 'evaluate_csv'), (csv_files, 'load_csv_dataset'),
+                         (dataset, 'load_dataset')):
+        monkeypatch.setattr(module, name, forbidden)

@@ -62,22 +62,6 @@ def test_training_on_the_recorded_cut_needs_bags_that_record_it(tmp_path, capsys
 
 
 # -- combinations of options: each contradiction is found before any data is read -------------
-@pytest.fixture
-def nothing_runs(monkeypatch):
-    """Reading data, training or evaluating fails the test: a check must have stopped first."""
-    import mixture_ip_ros.app.evaluation as evaluation
-    import mixture_ip_ros.app.training as training
-    import mixture_ip_ros.io.csv_files as csv_files
-    import mixture_ip_ros.io.dataset as dataset
-
-    def forbidden(*args, **kwargs):
-        raise AssertionError('reached data loading or training despite contradicting options')
-    for module, name in ((training, 'train_to_file'), (evaluation, 'evaluate'),
-                         (evaluation, 'evaluate_csv'), (csv_files, 'load_csv_dataset'),
-                         (dataset, 'load_dataset')):
-        monkeypatch.setattr(module, name, forbidden)
-
-
 def _inputs(tmp):
     (tmp / 'csv').mkdir()
     (tmp / 'csv' / 'a.csv').write_text('t,x,y,q\n0,1,2,3\n0.1,2,3,4\n')

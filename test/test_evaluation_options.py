@@ -15,6 +15,8 @@ from mixture_ip_ros.io.csv_files import write_csv_demonstration
 from mixture_ip_ros.io.model_file import load_model
 from mixture_ip_ros.scenarios.synthetic import mixture_demos
 
+from test_cli import _exits_2_in_one_line_and_creates_nothing
+
 SHARED = [[0, 3], [1, 4], [2, 5]]
 
 
@@ -94,22 +96,6 @@ def test_kept_share_refuses_a_fraction_outside_zero_to_one(fraction):
 
 
 # -- --translation on the command line ------------------------------------------------------
-@pytest.fixture
-def nothing_runs(monkeypatch):
-    """Reading data, training or evaluating fails the test: a check must have stopped first."""
-    import mixture_ip_ros.app.evaluation as evaluation
-    import mixture_ip_ros.app.training as training
-    import mixture_ip_ros.io.csv_files as csv_files
-    import mixture_ip_ros.io.dataset as dataset
-
-    def forbidden(*args, **kwargs):
-        raise AssertionError('reached data loading or training despite contradicting options')
-    for module, name in ((training, 'train_to_file'), (evaluation, 'evaluate'),
-                         (evaluation, 'evaluate_csv'), (csv_files, 'load_csv_dataset'),
-                         (dataset, 'load_dataset')):
-        monkeypatch.setattr(module, name, forbidden)
-
-
 def _inputs(tmp):
     (tmp / 'csv').mkdir()
     (tmp / 'csv' / 'a.csv').write_text('t,x,y,z,hx,hy,hz\n0,1,2,3,4,5,6\n0.1,2,3,4,5,6,7\n')
@@ -148,13 +134,7 @@ HANDS = ['--observed', 'x,y,z', '--controlled', 'hx,hy,hz']
 def test_a_translation_that_cannot_apply_fails_in_one_line_with_exit_2_before_any_data(
         tmp_path, capsys, nothing_runs, argv, message):
     _inputs(tmp_path)
-    before = sorted(p.name for p in tmp_path.iterdir())
-    with pytest.raises(SystemExit) as exit_:
-        main([a.format(tmp=tmp_path) for a in argv])
-    err = capsys.readouterr().err
-    assert exit_.value.code == 2
-    assert err.count('\n') == 1 and message.format(tmp=tmp_path) in err, err
-    assert sorted(p.name for p in tmp_path.iterdir()) == before
+    _exits_2_in_one_line_and_creates_nothing(tmp_path, capsys, argv, message)
 
 
 @pytest.mark.parametrize('extra, groups', [
