@@ -143,6 +143,22 @@ def test_min_interval_skips_correlated_samples(model_and_demos):
     assert sum(used) == 6 and est.n_observations == 6      # 100 Hz -> every 5th sample
 
 
+def test_a_recording_offered_is_what_update_makes_of_it(model_and_demos):
+    """offer (feeding a recording) uses and skips the same samples as update, to the same
+    posterior; it checks a sample only once it is used."""
+    model, demos, _ = model_and_demos
+    updated, offered = (OnlineEstimator(model, n_alpha=5, min_interval=0.05) for _ in range(2))
+    for t, y in zip(demos[0].t[:61], demos[0].observed[:61]):
+        assert updated.update(t, y) == offered.offer(t, y)
+    assert (offered.n_observations, offered.n_skipped) == (updated.n_observations,
+                                                           updated.n_skipped) == (13, 48)
+    assert np.array_equal(offered.joint_posterior(), updated.joint_posterior())
+    t_next = float(demos[0].t[61])                       # 10 ms after the last one used
+    assert offered.offer(t_next, [np.nan] * 3) is False       # skipped, never looked at
+    with pytest.raises(ValueError, match='NaN'):
+        updated.update(t_next, [np.nan] * 3)
+
+
 def test_online_rejects_bad_input(model_and_demos):
     model, _, _ = model_and_demos
     est = OnlineEstimator(model, n_alpha=5, min_interval=0.0)

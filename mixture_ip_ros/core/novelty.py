@@ -112,10 +112,7 @@ def held_out_statistics(model, demos, *, n_alpha: int, min_interval: float,
         est.reset()
         monitor = NoveltyMonitor(NoveltyThresholds(np.zeros(1), 0.0, window_size, min_interval))
         for row in observed_rows(demo):
-            t = float(demo.t[row])
-            # a sample within min_interval of the last one used is skipped, as update would
-            if est.admit(t):
-                est.absorb(t, demo.observed[row])
+            if est.offer(float(demo.t[row]), demo.observed[row]):
                 monitor.record(est.n_observations, est.log_marginal())
                 p, w = monitor.statistics()
                 prefix.setdefault(est.n_observations, []).append(p)

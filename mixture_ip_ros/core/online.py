@@ -145,10 +145,23 @@ class OnlineEstimator:
         y = self._checked(y)
         if not self.admit(t):
             return False
+        self._use(t, y)
+        return True
+
+    def offer(self, t: float, y) -> bool:
+        """:meth:`update` for a recording played back: ``y`` is checked only once the sample is
+        admitted. Most samples of a recording come within ``min_interval`` of the last one used
+        and are only counted as skipped, and the evaluations and training's calibrations play
+        hundreds of recordings."""
+        if not self.admit(t):
+            return False
+        self._use(t, self._checked(y))
+        return True
+
+    def _use(self, t, y):
         self._absorb(t, y)
         if self.prune_below > 0.0:
             self.prune()
-        return True
 
     def admit(self, t: float) -> bool:
         """Whether an observation at ``t`` is used: times increase and, after the first, are
@@ -551,16 +564,10 @@ def feed_until(est, demo, rows, j, t_max) -> int:
     """Feed ``est`` the observed samples ``rows[j:]`` (:func:`observed_rows`) of ``demo`` up to
     ``t_max`` s after onset, as the estimator node is fed them one by one
     (:meth:`OnlineEstimator.update`); returns the index into ``rows`` of the first sample not
-    fed. The one way every evaluation, calibration and bench plays a recording to the
-    estimator. A sample within ``min_interval`` of the last one used is only counted as
-    skipped, without the checks and copies of ``update`` (most samples of a 120 Hz
-    recording, and the held-out calibrations of training feed hundreds of recordings)."""
-    t = demo.t
-    while j < len(rows) and t[rows[j]] <= t_max + 1e-9:
-        if est.admit(float(t[rows[j]])):
-            est.absorb(float(t[rows[j]]), demo.observed[rows[j]])
-            if est.prune_below > 0.0:
-                est.prune()
+    fed (:meth:`OnlineEstimator.offer`). The one way every evaluation, calibration and bench
+    plays a recording to the estimator up to a time."""
+    while j < len(rows) and demo.t[rows[j]] <= t_max + 1e-9:
+        est.offer(float(demo.t[rows[j]]), demo.observed[rows[j]])
         j += 1
     return j
 
