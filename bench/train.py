@@ -11,10 +11,11 @@ runs (the machine may be shared).
 
 ``reference`` is the same path by the straightforward loop, in the same script: the floor's
 held-out curves from one MixtureIProMP(...).fit of the demonstrations of each fold (same folds,
-seeds and floors), and every EM run of the pattern mixture (each start of each leave-one-out
-and cluster-stability fit) on its own rather than side by side (PatternMixture.fit_many). The
-ratio ``speedup_vs_reference`` is what reusing per-demonstration work across folds and batching
-the pattern fits gain; ``same_selection`` whether both chose the same K and floor with curves
+seeds and floors), every EM run of the pattern mixture (each start of each leave-one-out and
+cluster-stability fit) on its own rather than side by side (PatternMixture.fit_many), and one
+fold after another on one thread (n_jobs=1). The ratio ``speedup_vs_reference`` is what
+reusing per-demonstration work across folds, batching the pattern fits and running the folds
+on both cores gain; ``same_selection`` whether both chose the same K and floor with curves
 equal to 1e-9.
 
 Prints one JSON object.
@@ -65,9 +66,10 @@ class Phases:
 
 
 def plain_heldout(demos, candidates, fractions=(), prior_scales=(), n_folds=5, progress=None,
-                  fold_seed=0, **params):
+                  fold_seed=0, n_jobs=None, prepared=None, **params):
     """calibrated_heldout_curves (the held-out log-likelihood and, with a controlled agent, the
-    controlled agent's RMS) by the straightforward loop (one fit per fold and floor)."""
+    controlled agent's RMS) by the straightforward loop (one fit per fold and floor, from the
+    fold's demonstrations, one after another: ``n_jobs`` and ``prepared`` are not used)."""
     import numpy as np
     from mixture_ip_ros.core.mixture import MixtureIProMP
     from mixture_ip_ros.core.selection import cv_folds, online_rms, prepare_for_cv
@@ -143,7 +145,8 @@ def one_run(bags: Path, reference: bool) -> dict:
     with tempfile.TemporaryDirectory() as out:
         model, info = training.train_to_file(
             demos, Path(out) / 'model.npz', robot=robot, n_basis=15, method='regression',
-            criterion='auto', noise='tied', candidates=range(1, 7))
+            criterion='auto', noise='tied', candidates=range(1, 7),
+            n_jobs=1 if reference else None)
     t2 = time.perf_counter()
     sel = info['selection']
     s = phases.seconds

@@ -14,6 +14,7 @@ from mixture_ip_ros.app.cli import main
     (['train', '{tmp}', '--out', '{tmp}/m.npz', '--n-basis', '1'], '--n-basis: 1 is not >= 2'),
     (['train', '{tmp}', '--out', '{tmp}/m.npz', '--max-components', 'six'],
      "--max-components: 'six' is not a whole number"),
+    (['train', '{tmp}', '--out', '{tmp}/m.npz', '--jobs', '0'], '--jobs: 0 is not >= 1'),
     (['train', '{tmp}', '--out', '{tmp}/m.npz', '--cut', 'manual'],
      "--cut: invalid choice: 'manual'"),
     (['evaluate', '--scenario', 'pole', '--out', '{tmp}/eval', '--bags', '{tmp}/none'],

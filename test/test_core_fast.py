@@ -50,3 +50,30 @@ def test_compact_lanes_moves_the_kept_columns_to_the_front_in_order():
     np.testing.assert_array_equal(out[:len(src)], columns[src])
     np.testing.assert_array_equal(out[len(src):], columns[len(src):])   # left as they were
 
+
+
+def test_expected_trajectory_is_the_speed_weighted_sum_of_the_plain_trajectories():
+    """expected_trajectory against interaction.trajectory_distribution's means, one per speed
+    hypothesis, weighted and summed; before, inside and after [0, 1] (held there); and its
+    positions alone, without the derivatives, the same."""
+    from mixture_ip_ros.core._fast import expected_trajectory
+    from mixture_ip_ros.core.basis import GaussianBasis
+    from mixture_ip_ros.core.interaction import trajectory_distribution
+    rng = np.random.default_rng(3)
+    basis = GaussianBasis(9)
+    M, n = 4, 3
+    weights = rng.standard_normal((M, n, basis.n_basis))
+    alphas, probs = rng.uniform(0.2, 1.5, M), rng.dirichlet(np.ones(M))
+    times = np.linspace(-0.2, 4.0, 57)
+    pos, vel, acc = expected_trajectory(weights, alphas, probs, times, basis.centers,
+                                        basis.width, True)
+    ref = [np.zeros((len(times), n)) for _ in range(3)]
+    for w, a, p in zip(weights, alphas, probs):
+        d = trajectory_distribution(w.ravel(), None, basis, a * times, a)
+        for r, key in zip(ref, ('position', 'velocity', 'acceleration')):
+            r += p * d[key]
+    for got, want in zip((pos, vel, acc), ref):
+        assert np.allclose(got, want, rtol=1e-10, atol=1e-12 * np.abs(want).max())
+    only, none_v, none_a = expected_trajectory(weights, alphas, probs, times, basis.centers,
+                                               basis.width, False)
+    assert np.array_equal(only, pos) and none_v.shape == none_a.shape == (0, n)

@@ -21,7 +21,7 @@ def patterns():
     demos = mixture_demos(seed=0, n_obs=3, n_ctrl=2, n_basis=8)[0]
     test = demos[::3]                              # a third never seen in training
     train = [d for i, d in enumerate(demos) if i % 3]
-    return train, test, calibrate(train, _fit), _fit(train)
+    return train, test, calibrate(train, lambda i: _fit([train[j] for j in i])), _fit(train)
 
 
 def _first_flag(model, thresholds, t, Y):
@@ -50,7 +50,7 @@ def test_a_return_to_rest_is_refused_within_three_observations(patterns):
 def test_a_pattern_never_learned_is_refused():
     demos = mixture_demos(seed=0, n_obs=3, n_ctrl=2, n_basis=8)[0]
     known = [d for d in demos if d.label != '2']
-    thresholds, model = calibrate(known, _fit), _fit(known)
+    thresholds, model = calibrate(known, lambda i: _fit([known[j] for j in i])), _fit(known)
     flags = [_first_flag(model, thresholds, d.t, d.observed) for d in demos if d.label == '2']
     assert all(f is not None and f <= 5 for f in flags), flags
 

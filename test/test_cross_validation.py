@@ -152,3 +152,39 @@ def test_heldout_loglik_of_em_data_with_a_robot_never_observed():
     demos[3] = Demonstration(blind.t, blind.observed, np.full_like(blind.controlled, np.nan))
     cal = heldout_loglik(demos, [1, 2], [1.0], n_basis=6, method='em', max_iter=5)
     assert np.all(np.isfinite(cal['scores']))
+
+
+def test_training_is_the_same_on_one_thread_or_several_and_its_folds_are_plain_fits(tmp_path):
+    """Training's held-out folds run on threads (n_jobs) and take what each demonstration is
+    on its own from one preparation: the same model and decisions on one thread or three,
+    and the speed weight's and the novelty test's folds are the fits each fold's
+    demonstrations give from scratch (with the set's smoothing, as every fold shares it)."""
+    from mixture_ip_ros.app.training import train_to_file
+    from mixture_ip_ros.core.demonstration import Layout
+    from mixture_ip_ros.core.novelty import calibrate
+    from mixture_ip_ros.core.online import SPEED_WEIGHTS, speed_log_scores
+    demos = mixture_demos(seed=2, n_obs=2, n_ctrl=1, counts=(6, 7, 6))[0]
+    layout = Layout(('x', 'y'), ('c',))
+    runs = [train_to_file(demos, tmp_path / f'm{j}.npz', layout=layout, candidates=(1, 2, 3, 4),
+                          n_basis=8, n_jobs=j) for j in (1, 3)]
+    (one, info), (three, info3) = runs
+    for key in ('selection', 'prior_scale', 'speed_weight', 'speed_scores', 'novelty'):
+        assert info[key] == info3[key], key
+    assert np.array_equal(one.means_, three.means_)
+    assert np.array_equal(one.covariances_, three.covariances_)
+    assert info['n_components'] == 3
+    params = {'n_basis': 8, 'smoothing': set_smoothing(demos, n_basis=8),
+              'prior_scale': one.prior_scale}
+    fold = cv_folds(len(demos), 5, 0)
+    total, n = np.zeros(len(SPEED_WEIGHTS)), 0
+    for f in range(fold.max() + 1):
+        model = MixtureIProMP(3, **params).fit([d for d, g in zip(demos, fold) if g != f])
+        score, m = speed_log_scores(model, [d for d, g in zip(demos, fold) if g == f])
+        total, n = total + score, n + m
+    assert np.allclose([info['speed_scores'][f'{w:g}'] for w in SPEED_WEIGHTS], total / n,
+                       rtol=1e-9, atol=0)
+    plain = calibrate(demos, lambda i: MixtureIProMP(3, speed_weight=one.speed_weight,
+                                                     **params).fit([demos[j] for j in i]),
+                      n_jobs=1)
+    assert np.allclose(one.novelty_.prefix, plain.prefix, rtol=1e-9, atol=0)
+    assert np.isclose(one.novelty_.window, plain.window, rtol=1e-9, atol=0)

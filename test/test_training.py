@@ -160,10 +160,11 @@ def test_training_says_where_its_time_went_stage_by_stage(tmp_path):
         _, info = train_to_file(demos, tmp_path / f'm{i}.npz', layout=Layout(('o',), ('c',)),
                                 candidates=(1, 2, 3), n_basis=6,
                                 stages=Stages(text_stages(stream)))
-    names = ['choosing K', 'covariance floor', 'speed weight', 'final fit', 'novelty', 'saving']
+    names = ['preparing', 'choosing K', 'covariance floor', 'speed weight', 'final fit',
+             'novelty', 'saving']
     assert list(info['seconds']) == names and all(s >= 0 for s in info['seconds'].values())
     lines = log.getvalue().splitlines()
     assert [ln.split(': ')[0] for ln in lines] == names and all(ln.endswith(' s') for ln in lines)
     shown = terminal.getvalue().splitlines()
-    assert shown[0] == 'choosing K ...' and shown[1].startswith('choosing K: ')
+    assert shown[0] == 'preparing ...' and shown[1].startswith('preparing: ')
     assert len(shown) == 2 * len(names)

@@ -81,7 +81,7 @@ def _train(args):
     from mixture_ip_ros.robot.description import load_description
     robot = load_description(args.robot)
     kwargs = {'n_basis': args.n_basis, 'method': args.method, 'criterion': args.criterion,
-              'noise': args.noise}
+              'noise': args.noise, 'n_jobs': args.jobs}
     if args.observation_noise is not None:
         kwargs['observation_noise'] = args.observation_noise
     if args.csv is not None:
@@ -389,6 +389,9 @@ def build_parser():
     t.add_argument('--method', choices=['regression', 'em'], default='regression',
                    help="'em' learns from demonstrations with missing data (occlusions)")
     t.add_argument('--on-error', choices=['skip', 'raise'], default='skip')
+    t.add_argument('--jobs', type=_bounded(int, 1, name='a whole number'), default=None,
+                   help='threads for the held-out folds (default: every core this process may '
+                        'use; the model is the same for any number)')
     t.add_argument('--cut', choices=['detected', 'recorded'], default='detected',
                    help="bags: each demonstration from the onset to the end the observer finds, "
                         "or ('recorded') the ones its bag records (mixture_ip_ros.onset_ns / "

@@ -42,6 +42,7 @@ from mixture_ip_ros.core.patterns import (PatternSpace, heldout_curve, partition
                                           translation_groups)
 from mixture_ip_ros.core.novelty import calibrate as calibrate_novelty
 from mixture_ip_ros.core.numerics import first_best, tie_tolerance
+from mixture_ip_ros.core.parallel import checked_jobs, map_threads
 from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE, bag_layout
 from mixture_ip_ros.io.model_file import save_model
 from mixture_ip_ros.robot.description import load_description
@@ -130,7 +131,7 @@ def _curve_summary(candidates, scores, curve):
 
 def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str = 'auto',
           n_folds: int = 5, progress=None, labels=None, prior_scales=PRIOR_SCALES, stages=None,
-          **params):
+          n_jobs=None, prepared=None, **params):
     """Fit the mixture; K given, or chosen by ``criterion`` ('auto' = 'patterns', or 'loo';
     see the module docstring). ``labels`` makes a supervised fit (one component per class,
     K = number of classes). ``params`` go to MixtureIProMP; without ``prior_scale`` among them,
@@ -138,9 +139,14 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
     (model, info dict): info['selection'] holds the curve of the criterion, the chosen K, its
     floor and whether the curve has a clear optimum (a flat curve is reported as such, never
     silently read as K = 1); info['seconds'] the time of each stage (``stages``, a
-    :class:`Stages`, also shows them).
+    :class:`Stages`, also shows them). The held-out folds run on ``n_jobs`` threads
+    (core.parallel.map_threads; None: every core this process may use), with the same result
+    for any number. ``prepared``: what core.selection.prepare_for_cv made of ``demos`` with
+    these ``params`` and method 'regression', where the caller has it (else made here once,
+    when a stage needs it).
     """
     demos = list(demos)
+    checked_jobs(n_jobs)
     stages = Stages() if stages is None else stages
     if criterion not in CRITERIA:
         raise ValueError(f'criterion must be one of {CRITERIA}, got {criterion!r}')
@@ -160,6 +166,14 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
     # data): an EM fit takes 10-30 s, and they need dozens. The final model below is fitted
     # with the method asked for.
     curve_params = {**params, 'method': 'regression'}
+    # What each demonstration is on its own (its weights, residuals, the set's smoothing):
+    # made once, taken by every stage's folds and, for a regression model, the final fit.
+    shared = [prepared]
+
+    def data():
+        if shared[0] is None:
+            shared[0] = prepare_for_cv(demos, curve_params)
+        return shared[0]
     n_fold = int(min(n_folds, len(demos)))
     n_train = len(demos) - int(np.ceil(len(demos) / max(n_fold, 1)))
     if n_components is None:
@@ -172,10 +186,10 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
             raise ValueError(f'{len(demos)} demonstrations are too few to choose K')
         with stages('choosing K'):
             if criterion == 'patterns':
-                selection = _pattern_selection(demos, candidates, curve_params)
+                selection = _pattern_selection(data(), candidates, curve_params)
             else:
                 selection = _loo_selection(demos, candidates, n_folds, progress, prior_scales,
-                                           curve_params)
+                                           curve_params, n_jobs, data())
         n_components = selection['chosen']
         if not selection['clear_optimum']:
             logger.warning('K = %d by %s, but %s', n_components, criterion, selection['note'])
@@ -188,19 +202,23 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
         elif n_components <= n_train:
             with stages('covariance floor'):
                 params = {**params, 'prior_scale': _calibrated_floor(
-                    demos, n_components, n_folds, progress, prior_scales, curve_params)}
+                    demos, n_components, n_folds, progress, prior_scales, curve_params, n_jobs,
+                    data())}
         if 'selection' in info:
             info['selection']['prior_scale'] = params.get('prior_scale')
     # The same for the speed weight; EM's demonstrations may lack a whole agent, which the
     # regression fits of the calibration cannot take: EM keeps the configured weight.
     if 'speed_weight' not in params and params.get('method') != 'em':
         with stages('speed weight'):
-            weight, scores = _calibrated_speed_weight(demos, n_components, labels, n_folds,
-                                                      {**params, 'method': 'regression'})
+            weight, scores = _calibrated_speed_weight(demos, data(), n_components, labels,
+                                                      n_folds, {**params, 'method': 'regression'},
+                                                      n_jobs)
         params = {**params, 'speed_weight': weight}
         info['speed_scores'] = scores
     with stages('final fit'):
-        model = MixtureIProMP(n_components=n_components, **params).fit(demos, labels=labels)
+        model = MixtureIProMP(n_components=n_components, **params)
+        regression = model.method == 'regression' and shared[0] is not None
+        model.fit(shared[0] if regression else demos, labels=labels)
     info['n_components'] = int(n_components)
     info['prior_scale'] = float(model.prior_scale)
     info['speed_weight'] = float(model.speed_weight)
@@ -209,10 +227,10 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
     return model, info
 
 
-def _pattern_selection(demos, candidates, params) -> dict:
+def _pattern_selection(data, candidates, params) -> dict:
     """K by the held-out likelihood in the pattern space (core.patterns), and among the K it
-    cannot tell apart, by how reproducible their partitions are."""
-    data = prepare_for_cv(demos, params)
+    cannot tell apart, by how reproducible their partitions are (``data``: prepare_for_cv of
+    the demonstrations)."""
     space = PatternSpace(params.get('n_basis', _DEFAULT_N_BASIS), data.n_observed,
                          translation=params.get('translation', ())).fit(data.W)
     X = space.transform(data.W)
@@ -254,7 +272,8 @@ def _pattern_selection(demos, candidates, params) -> dict:
             'explained_variance': float(space.explained_variance_ratio_.sum())}
 
 
-def _loo_selection(demos, candidates, n_folds, progress, prior_scales, params) -> dict:
+def _loo_selection(demos, candidates, n_folds, progress, prior_scales, params, n_jobs=None,
+                   prepared=None) -> dict:
     """K by the thesis's leave-one-out RMS of the controlled agent, each K at the robot's
     floor calibrated on held-out folds (a K too large for the folds, as leave-one-out trains on
     one more demonstration, takes the floor of the largest K they calibrated)."""
@@ -267,7 +286,8 @@ def _loo_selection(demos, candidates, n_folds, progress, prior_scales, params) -
     n_cal = len(scales) * len(folded) * n_fold
     total = n_cal + len(candidates) * len(demos)
     curves = calibrated_heldout_curves(demos, folded, (), scales, n_folds,
-                                       _offset_progress(progress, 0, total), **params)
+                                       _offset_progress(progress, 0, total), n_jobs=n_jobs,
+                                       prepared=prepared, **params)
     calibrated = dict(zip(folded, curves['controlled_rms']['prior_scale']))
     floor = {K: calibrated[max(k for k in folded if k <= K)] for K in candidates}
     rms = np.vstack([
@@ -281,36 +301,41 @@ def _loo_selection(demos, candidates, n_folds, progress, prior_scales, params) -
             'prior_scale': floor[summary['chosen']]}
 
 
-def _calibrated_floor(demos, K, n_folds, progress, prior_scales, params) -> float:
+def _calibrated_floor(demos, K, n_folds, progress, prior_scales, params, n_jobs=None,
+                      prepared=None) -> float:
     """The covariance floor of a K-component model, calibrated on held-out folds: the one with
     the best held-out likelihood or, where there is a controlled agent, the one that predicts
     it best among those not significantly worse (core.mixture.calibrated_heldout_curves)."""
     curves = calibrated_heldout_curves(demos, [K], (), list(prior_scales), n_folds,
-                                       _offset_progress(progress, 0, None), **params)
+                                       _offset_progress(progress, 0, None), n_jobs=n_jobs,
+                                       prepared=prepared, **params)
     which = 'controlled_rms' if 'controlled_rms' in curves else 'loglik'
     return float(curves[which]['prior_scale'][0])
 
 
-def _calibrated_speed_weight(demos, n_components, labels, n_folds, params):
+def _calibrated_speed_weight(demos, data, n_components, labels, n_folds, params, n_jobs=None):
     """The speed weight (core.online.SPEED_WEIGHTS) whose tempered phase posterior predicts
     held-out demonstrations' speeds best from their beginnings (core.online.speed_log_scores,
-    summed over ``n_folds`` folds; ties: the larger weight, nearer eq. 16), and the mean score
-    of each weight; (1, None) where no fold can hold the model. The fits are regression fits,
-    as the floor's are."""
+    summed over ``n_folds`` folds on ``n_jobs`` threads; ties: the larger weight, nearer eq.
+    16), and the mean score of each weight; (1, None) where no fold can hold the model. The
+    fits are regression fits of the folds of ``data`` (prepare_for_cv of ``demos``), as the
+    floor's are."""
     if len(demos) < 2:
         return 1.0, None
     fold = cv_folds(len(demos), n_folds, 0)
-    total, n = np.zeros(len(SPEED_WEIGHTS)), 0
-    for f in range(fold.max() + 1):
+
+    def one_fold(f):
         train_i, test_i = np.flatnonzero(fold != f), np.flatnonzero(fold == f)
         fit_labels = None if labels is None else [labels[i] for i in train_i]
         if len(train_i) < n_components or (fit_labels is not None
                                            and len(set(fit_labels)) != n_components):
-            continue
+            return np.zeros(len(SPEED_WEIGHTS)), 0
         model = MixtureIProMP(n_components=n_components, **params).fit(
-            [demos[i] for i in train_i], labels=fit_labels)
-        score, m = speed_log_scores(model, [demos[i] for i in test_i])
-        total += score
+            data.take(train_i), labels=fit_labels)
+        return speed_log_scores(model, [demos[i] for i in test_i])
+    total, n = np.zeros(len(SPEED_WEIGHTS)), 0
+    for score, m in map_threads(one_fold, range(fold.max() + 1), n_jobs):
+        total += score              # in the folds' order, whatever the threads
         n += m
     if n == 0:
         return 1.0, None
@@ -381,15 +406,22 @@ def train_to_file(demos, out_path, layout: Layout = None, observed_frame: str = 
     if layout.observed == bag_layout().observed and layout.observed_units == ('m',) * 3:
         kwargs.setdefault('observation_noise', WRIST_OBSERVATION_NOISE)
     stages = kwargs.setdefault('stages', Stages())
+    unsupervised = kwargs.get('labels') is None
+    if unsupervised or kwargs.get('method') != 'em':
+        # Training's stages and the novelty folds below share it (train's ``prepared``).
+        with stages('preparing'):
+            kwargs['prepared'] = prepare_for_cv(demos, {**_model_params(kwargs),
+                                                        'method': 'regression'})
     model, info = train(demos, **kwargs)
-    if kwargs.get('labels') is None:
+    if unsupervised:
         # Held-out folds fitted by regression, as the K curves: EM would take minutes.
         params = {**_model_params(kwargs), 'method': 'regression',
                   'prior_scale': model.prior_scale}      # the floor chosen with K
         with stages('novelty'):
             model.novelty_ = calibrate_novelty(
-                demos, lambda part: MixtureIProMP(n_components=model.n_components,
-                                                  **params).fit(part))
+                demos, lambda index: MixtureIProMP(n_components=model.n_components,
+                                                   **params).fit(kwargs['prepared'].take(index)),
+                n_jobs=kwargs.get('n_jobs'))
         info['novelty'] = {'prefix': model.novelty_.prefix.round(3).tolist(),
                            'window': round(model.novelty_.window, 3)}
     with stages('saving'):

@@ -5,7 +5,8 @@ function it must equal, and the tests compare them (test_core_fast, test_core_on
 - kalman_update: one observation, every hypothesis; the recursive form of
   promp.weight_posterior (the batch conditioning, eqs. 3-5 and 17-18), equal to rounding;
 - basis_rows: GaussianBasis.__call__ (psi clamped to [0, 1]), equal to rounding;
-- mean_trajectory: the means of interaction.trajectory_distribution, equal to rounding.
+- mean_trajectory: the means of interaction.trajectory_distribution, equal to rounding;
+- expected_trajectory: their expectation over phase speeds, equal to rounding.
 
 Kalman update. Per hypothesis h the observed-agent weights have N(mu_h, Sigma_h); the
 observation y = (I_P kron psi_h^T) w + e, e ~ N(0, diag(noise)). The update factors
@@ -148,7 +149,7 @@ for _op, _name in ((operator.add, 'fadd'), (operator.sub, 'fsub'), (operator.mul
     overload(_op)(_lanewise(_name))
 
 
-@numba.njit(cache=True, fastmath=False, boundscheck=False)
+@numba.njit(cache=True, nogil=True, fastmath=False, boundscheck=False)
 def _basis_row(z, centers, width, out):
     """psi(z) of GaussianBasis (clamped to [0, 1]) into ``out`` (N,)."""
     N = centers.shape[0]
@@ -163,7 +164,7 @@ def _basis_row(z, centers, width, out):
         out[n] /= s
 
 
-@numba.njit(cache=True, fastmath=False, boundscheck=False)
+@numba.njit(cache=True, nogil=True, fastmath=False, boundscheck=False)
 def basis_rows(z, centers, width):
     """psi(z) of GaussianBasis (clamped to [0, 1]) for each phase in z: (M, N)."""
     out = np.empty((z.shape[0], centers.shape[0]))
@@ -198,7 +199,7 @@ def _tri(i, j):
 
 
 # 'contract' only: multiply-adds fused, no reassociation; every lane computed alike.
-@numba.njit(cache=True, fastmath={'contract'}, boundscheck=False)
+@numba.njit(cache=True, nogil=True, fastmath={'contract'}, boundscheck=False)
 def kalman_update(cov, mu, loglik, n, alpha_index, alphas, t, centers, width, y, noise,
                   log_prior, hypothesis, joint):
     """One observation ``y`` at ``t`` s, in place for the first ``n`` columns (the tracked
@@ -356,7 +357,7 @@ def kalman_update(cov, mu, loglik, n, alpha_index, alphas, t, centers, width, y,
     return smallest
 
 
-@numba.njit(cache=True, boundscheck=False)
+@numba.njit(cache=True, nogil=True, boundscheck=False)
 def compact_lanes(a, src):
     """In place: column k of the lane-grouped ``a`` (groups, m W) becomes column src[k]
     (src increasing, so no column is overwritten before it is moved)."""
@@ -368,7 +369,7 @@ def compact_lanes(a, src):
                 a[k // W, e * W + k % W] = a[s // W, e * W + s % W]
 
 
-@numba.njit(cache=True, fastmath=False, boundscheck=False)
+@numba.njit(cache=True, nogil=True, fastmath=False, boundscheck=False)
 def mean_trajectory(weights, z, centers, width, alpha):
     """Mean positions, velocities, accelerations (len(z), n) of the DOFs with ``weights`` (n, N)
     at phases z for the phase speed alpha: eqs. 1-3 with GaussianBasis.evaluate's basis and its
@@ -405,3 +406,56 @@ def mean_trajectory(weights, z, centers, width, alpha):
                     acc[t, j] += alpha * alpha * ddpsi * weights[j, i]
     return pos, vel, acc
 
+
+
+@numba.njit(cache=True, nogil=True, fastmath=False, boundscheck=False)
+def expected_trajectory(weights, alphas, probs, times, centers, width, derivatives):
+    """sum_m probs[m] mean_trajectory(weights[m], alphas[m] times, ..., alphas[m]): the
+    expectation over phase-speed hypotheses of the mean paths (weights (M, n, N)), each
+    hypothesis's path formed as mean_trajectory forms it and added in the order of m, so equal
+    to rounding. Without ``derivatives`` the velocities and accelerations (then (0, n)) are not
+    computed: the basis's derivatives are two thirds of the work."""
+    M, n, N = weights.shape
+    T = times.shape[0]
+    Td = T if derivatives else 0
+    pos = np.zeros((T, n))
+    vel = np.zeros((Td, n))
+    acc = np.zeros((Td, n))
+    h = width * width
+    b = np.empty(N)
+    db = np.empty(N)
+    ddb = np.empty(N)
+    row = np.empty((3, n))
+    for m in range(M):
+        alpha, p = alphas[m], probs[m]
+        for t in range(T):
+            z = alpha * times[t]
+            inside = 0.0 <= z <= 1.0
+            zc = min(max(z, 0.0), 1.0)
+            s = ds = dds = 0.0
+            for i in range(N):
+                d = zc - centers[i]
+                b[i] = np.exp(-0.5 * d * d / h)
+                s += b[i]
+                if derivatives:
+                    db[i] = -b[i] * d / h
+                    ddb[i] = b[i] * (d * d / (h * h) - 1.0 / h)
+                    ds += db[i]
+                    dds += ddb[i]
+            row[:] = 0.0
+            for i in range(N):
+                psi = b[i] / s
+                for j in range(n):
+                    row[0, j] += psi * weights[m, j, i]
+                if derivatives and inside:
+                    dpsi = (db[i] - psi * ds) / s
+                    ddpsi = (ddb[i] - 2.0 * dpsi * ds - psi * dds) / s
+                    for j in range(n):
+                        row[1, j] += alpha * dpsi * weights[m, j, i]
+                        row[2, j] += alpha * alpha * ddpsi * weights[m, j, i]
+            for j in range(n):
+                pos[t, j] += p * row[0, j]
+                if derivatives:
+                    vel[t, j] += p * row[1, j]
+                    acc[t, j] += p * row[2, j]
+    return pos, vel, acc

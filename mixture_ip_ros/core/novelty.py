@@ -27,6 +27,8 @@ from typing import Optional
 
 import numpy as np
 
+from .parallel import map_threads
+
 WINDOW = 5           # observations: 0.25 s at the node's 20 Hz
 MAX_PREFIX = 40      # per-n prefix thresholds up to here, then one for every larger n
 
@@ -129,20 +131,25 @@ def _threshold(values) -> float:
 
 
 def calibrate(demos, fit, *, n_alpha: int = 50, min_interval: float = 0.05, n_folds: int = 5,
-              window_size: int = WINDOW, random_state=0) -> NoveltyThresholds:
-    """Thresholds from ``demos`` held out in ``n_folds`` folds; ``fit(train)`` returns a fitted
-    MixtureIProMP (the same configuration as the model they will guard)."""
+              window_size: int = WINDOW, random_state=0, n_jobs=None) -> NoveltyThresholds:
+    """Thresholds from ``demos`` held out in ``n_folds`` folds; ``fit(index)`` returns a
+    MixtureIProMP (the same configuration as the model they will guard) fitted to the
+    demonstrations ``demos[i] for i in index`` (by index, so that what a caller prepared of
+    each demonstration once serves every fold). The folds run on ``n_jobs`` threads
+    (core.parallel.map_threads; None: every core), so ``fit`` must not share mutable state
+    between calls."""
     from mixture_ip_ros.core.selection import cv_folds
     demos = list(demos)
     if len(demos) < 2:
         raise ValueError('novelty calibration needs at least 2 demonstrations')
     folds = cv_folds(len(demos), min(n_folds, len(demos)), random_state)
-    prefix, windows = {}, []
-    for f in range(folds.max() + 1):
-        train = [d for d, g in zip(demos, folds) if g != f]
+
+    def one_fold(f):
         test = [d for d, g in zip(demos, folds) if g == f]
-        by_n, w = held_out_statistics(fit(train), test, n_alpha=n_alpha,
-                                      min_interval=min_interval, window_size=window_size)
+        return held_out_statistics(fit(np.flatnonzero(folds != f)), test, n_alpha=n_alpha,
+                                   min_interval=min_interval, window_size=window_size)
+    prefix, windows = {}, []
+    for by_n, w in map_threads(one_fold, range(folds.max() + 1), n_jobs):
         for n, values in enumerate(by_n, start=1):
             prefix.setdefault(n, []).extend(values)
         windows.extend(w)

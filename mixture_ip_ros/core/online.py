@@ -15,8 +15,8 @@ from typing import NamedTuple
 import numpy as np
 from scipy import linalg
 
-from ._fast import (W, basis_rows, compact_lanes, from_lanes, kalman_update, mean_trajectory,
-                    to_lanes, tri_index)
+from ._fast import (W, basis_rows, compact_lanes, expected_trajectory, from_lanes,
+                    kalman_update, mean_trajectory, to_lanes, tri_index)
 from .interaction import trajectory_distribution
 from .numerics import logsumexp
 from .phase import (alpha_grid, alpha_log_prior, log_density_on_grid, tempered_speed_posterior,
@@ -515,7 +515,7 @@ class OnlineEstimator:
         keep = np.flatnonzero(p >= SPEED_SUPPORT)
         return keep, p[keep] / p[keep].sum()
 
-    def expected_controlled(self, times, component=None):
+    def expected_controlled(self, times, component=None, derivatives: bool = True):
         """The controlled agent's expected path at ``times`` (s since onset) under component k
         (k* if None), the phase speed marginalised: sum_m p_eta(alpha_m | D, k)
         E[y_c(alpha_m t) | D, k, alpha_m] over :meth:`speed_hypotheses`. Under squared error
@@ -523,19 +523,17 @@ class OnlineEstimator:
         timing, and when the speed is uncertain (a wave whose pace the prefix does not tell) a
         path off by half a period errs more than the mean. Each hypothesis holds its final
         posture after its own end (alpha_m t > 1). Returns (k, positions, velocities,
-        accelerations), each (len(times), Q)."""
+        accelerations), each (len(times), Q); without ``derivatives`` (an evaluation of
+        positions) the velocities and accelerations are None and not computed."""
         k = self._map_indices()[0] if component is None else int(component)
         times = np.asarray(times, dtype=float)
         speeds, probs = self.speed_hypotheses(k)
         mu_o = np.array([self._observed_mean(k, m) for m in speeds])
+        mean_c = self.controlled_mean(k, mu_o).reshape(len(speeds), -1, self.n_basis)
         basis = self.model.basis_
-        out = [np.zeros((times.size, self.model.n_controlled_)) for _ in range(3)]
-        for a, p, mean_c in zip(self.alphas[speeds], probs, self.controlled_mean(k, mu_o)):
-            for acc, part in zip(out, mean_trajectory(mean_c.reshape(-1, self.n_basis),
-                                                      a * times, basis.centers, basis.width,
-                                                      a)):
-                acc += p * part
-        return (k, *out)
+        pos, vel, acc = expected_trajectory(mean_c, self.alphas[speeds], probs, times,
+                                            basis.centers, basis.width, derivatives)
+        return (k, pos, vel, acc) if derivatives else (k, pos, None, None)
 
     def predict_at_rest(self, y_final, component=None):
         """The controlled agent's final posture once the movement has ended: eq. 13 with D the
@@ -626,6 +624,7 @@ def prefix_predictions(est, demo, fractions) -> list:
         j = feed_until(est, demo, rows, j, f * demo.duration)
         rest = np.flatnonzero((demo.t > f * demo.duration + 1e-9) & recorded)
         k, alpha = est.map_hypothesis()
-        pred = est.expected_controlled(demo.t[rest], component=k)[1] if rest.size else None
+        pred = (est.expected_controlled(demo.t[rest], component=k, derivatives=False)[1]
+                if rest.size else None)
         out.append(Prefix(int(k), pred, rest, float(alpha)))
     return out

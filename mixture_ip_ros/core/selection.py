@@ -23,6 +23,7 @@ from .interaction import trajectory_distribution
 from .mixture import MixtureIProMP, Prepared
 from .numerics import first_best, logsumexp_rows, tie_tolerance
 from .online import OnlineEstimator, prefix_predictions
+from .parallel import ProgressCount, map_threads
 from .phase import alpha_log_density
 from .promp import ObservationStats, log_evidence, observation_stats, stack_stats
 
@@ -253,7 +254,7 @@ def cv_folds(n: int, n_folds: int, random_state=0):
 
 
 def _heldout_scores(demonstrations, candidates, scales, n_folds, progress, fold_seed, params,
-                    fractions=(), controlled=False):
+                    fractions=(), controlled=False, n_jobs=None, data=None):
     """Held-out scores, each (len(scales), len(candidates), n): every fold's model is the one
     ``MixtureIProMP(K, prior_scale=scale, **params).fit`` learns from the other folds, scored
     on the fold. 'loglik': :meth:`MixtureIProMP.score_demonstrations`; with ``fractions`` also
@@ -262,10 +263,12 @@ def _heldout_scores(demonstrations, candidates, scales, n_folds, progress, fold_
     once, and each fold's k-means start of each K once for every scale (it does not depend on
     the floor). With ``controlled`` and a controlled agent, also 'controlled_rms':
     :func:`online_rms` of the held-out demonstration (NaN for one with nothing to predict).
-    ``progress(done, total, K)`` after each fit."""
+    ``progress(done, total, K)`` after each fit. The fits run side by side on ``n_jobs``
+    threads (core.parallel.map_threads; None: every core), each filling its own entries.
+    ``data``: :func:`prepare_for_cv` of the demonstrations, if the caller has it."""
     demos = list(demonstrations)
     fold = cv_folds(len(demos), n_folds, fold_seed)
-    data = prepare_for_cv(demos, params)
+    data = prepare_for_cv(demos, params) if data is None else data
     shape = (len(scales), len(candidates), len(demos))
     out = {'loglik': np.empty(shape)}
     basis = GaussianBasis(params.get('n_basis', _DEFAULT_N_BASIS))
@@ -274,31 +277,37 @@ def _heldout_scores(demonstrations, candidates, scales, n_folds, progress, fold_
     if fractions:
         out['completion'], out['completion_rms'] = np.empty(shape), np.empty(shape)
         beginnings = beginning_stats(basis, demos, checked_fractions(fractions))
-    done, total = 0, len(scales) * len(candidates) * (fold.max() + 1)
-    for f in range(fold.max() + 1):
-        train = data.take(fold != f)
-        test = np.flatnonzero(fold == f)
-        test_stats = data.take(test).stats
-        for a, K in enumerate(candidates):
-            init = None
-            for b, scale in enumerate(scales):
-                model = MixtureIProMP(n_components=K, **{**params, 'prior_scale': scale})
-                if init is None and len(train.W) >= K:
-                    init = model.initial_clusters(train)
-                model.fit(train, init=init)
-                out['loglik'][b, a, test] = model.score_statistics(test_stats, data.alphas[test])
-                if 'controlled_rms' in out:
-                    out['controlled_rms'][b, a, test] = online_rms(model,
-                                                                   [demos[i] for i in test])
-                if fractions:
-                    density, rms = completion_statistics(model, 
-                        test_stats, [st.take(test) for st in beginnings],
-                        data.alphas[test])
-                    out['completion'][b, a, test] = density.mean(axis=1)
-                    out['completion_rms'][b, a, test] = rms.mean(axis=1)
-                done += 1
-                if progress:
-                    progress(done, total, K)
+    counter = ProgressCount(progress, len(scales) * len(candidates) * (fold.max() + 1))
+    folds = [(data.take(fold != f), np.flatnonzero(fold == f)) for f in range(fold.max() + 1)]
+
+    def start(task):
+        (train, _), K = task
+        if len(train.W) < K:
+            return None
+        return MixtureIProMP(n_components=K, **params).initial_clusters(train)
+    # The k-means start of a fold's K is the same for every floor: made once, then every
+    # (fold, K, floor) fit is a task of its own (more tasks than threads keeps both busy).
+    tasks = [((f, a), (folds[f], K)) for f in range(len(folds)) for a, K in enumerate(candidates)]
+    inits = dict(zip([key for key, _ in tasks], map_threads(start, [t for _, t in tasks], n_jobs)))
+
+    def one_fit(task):
+        f, a, b = task
+        (train, test), K = folds[f], candidates[a]
+        model = MixtureIProMP(n_components=K, **{**params, 'prior_scale': scales[b]})
+        model.fit(train, init=inits[f, a])
+        out['loglik'][b, a, test] = model.score_statistics(data.take(test).stats,
+                                                           data.alphas[test])
+        if 'controlled_rms' in out:
+            out['controlled_rms'][b, a, test] = online_rms(model, [demos[i] for i in test])
+        if fractions:
+            density, rms = completion_statistics(
+                model, data.take(test).stats, [st.take(test) for st in beginnings],
+                data.alphas[test])
+            out['completion'][b, a, test] = density.mean(axis=1)
+            out['completion_rms'][b, a, test] = rms.mean(axis=1)
+        counter.step(K)
+    map_threads(one_fit, [(f, a, b) for f in range(len(folds)) for a in range(len(candidates))
+                          for b in range(len(scales))], n_jobs)
     return out
 
 
@@ -307,7 +316,8 @@ _DEFAULT_N_BASIS = inspect.signature(MixtureIProMP).parameters['n_basis'].defaul
 
 def calibrated_heldout_curves(demonstrations, candidates, fractions=COMPLETION_FRACTIONS,
                               prior_scales=PRIOR_SCALES, n_folds: int = 5, progress=None,
-                              fold_seed=0, controlled: bool = True, **params):
+                              fold_seed=0, controlled: bool = True, n_jobs=None, prepared=None,
+                              **params):
     """Every held-out criterion for K from the same cross-validated fits, each K at the
     covariance floor the criterion itself prefers.
 
@@ -344,6 +354,9 @@ def calibrated_heldout_curves(demonstrations, candidates, fractions=COMPLETION_F
       and 'completion_rms', the RMS error of the rest predicted from the beginning (lower is
       better), each averaged over the fractions f (:func:`score_completion`).
 
+    The folds run on ``n_jobs`` threads (None: every core; the same result for any number).
+    ``prepared``: :func:`prepare_for_cv` of the demonstrations with these ``params``, where
+    the caller has it (training shares it between its stages).
     Returns {criterion: {'scores' (len(candidates), n): each K's per-demonstration score at
     its floor, 'prior_scale': the floor per candidate, 'prior_scales' and 'mean_by_scale'
     (len(prior_scales), len(candidates)): the mean of every curve tried}}.
@@ -354,7 +367,7 @@ def calibrated_heldout_curves(demonstrations, candidates, fractions=COMPLETION_F
         raise ValueError(f'prior_scales must be positive numbers, got {prior_scales!r}')
     params = {k: v for k, v in params.items() if k != 'prior_scale'}
     scores = _heldout_scores(demos, candidates, scales, n_folds, progress, fold_seed, params,
-                             tuple(fractions), controlled)
+                             tuple(fractions), controlled, n_jobs, prepared)
     out = {}
     for name, S in scores.items():
         if name == 'controlled_rms':

@@ -145,12 +145,14 @@ def _fold(demos, labels, fold, config: EvalConfig, seed: int, f: int) -> dict:
     contacts = [contact_row(demos[i]) for i in test_i]
     examples, timings = {}, {}
     t0 = time.perf_counter()
-    model, info = trained(train, config, random_state=seed)
-    single, _ = trained(train, config, n_components=1)
-    supervised, _ = trained(train, config, labels=labels[train_i])
+    # One thread per fold's training: the folds already fill the cores, a process each (_run).
+    fit = partial(trained, train, config, n_jobs=1)
+    model, info = fit(random_state=seed)
+    single, _ = fit(n_components=1)
+    supervised, _ = fit(labels=labels[train_i])
     # Training with K given fits what training with K chosen fits once it chose that K.
     true_k = (model if info['n_components'] == len(classes) else
-              trained(train, config, n_components=len(classes), random_state=seed)[0])
+              fit(n_components=len(classes), random_state=seed)[0])
     timings['training_s'] = time.perf_counter() - t0
     names = majority_labels(model, train)
     comp_train = np.argmax(model.resp_, axis=1)
