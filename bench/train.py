@@ -3,17 +3,19 @@
 The bags are generated into a temporary folder (`mixture-ip generate --scenario box_assembly`
 defaults; not timed). Each run is a fresh process doing what `mixture-ip train bags/ --out
 model.npz` does: load the bags (load_s), then app.training.train_to_file with K chosen over
-1..6 (train_s): K by the pattern space's leave-one-out curve (patterns_s), the chosen K's
-covariance floor calibrated on held-out folds (heldout_s), both together selection_s, the final
-fit (fit_s), the novelty calibration (novelty_s) and the save (save_s). n_fits counts every
-mixture fit; peak_rss_mb is the run's peak resident memory. Top-level keys are medians over the
-runs (the machine may be shared).
+1..6 (train_s), its stages as training reports them (info['seconds']): the demonstrations
+prepared once (prepare_s), K by the pattern space's leave-one-out curve (patterns_s), the chosen
+K's covariance floor calibrated on held-out folds (heldout_s), both together selection_s, the
+speed weight (speed_s), the final fit (fit_s), the novelty calibration (novelty_s) and the save
+(save_s). n_fits counts every mixture fit, on any thread; peak_rss_mb is the run's peak
+resident memory. Top-level keys are medians over the runs (the machine may be shared).
 
 ``reference`` is the same path by the straightforward loop, in the same script: the floor's
 held-out curves from one MixtureIProMP(...).fit of the demonstrations of each fold (same folds,
 seeds and floors), every EM run of the pattern mixture (each start of each leave-one-out and
 cluster-stability fit) on its own rather than side by side (PatternMixture.fit_many), and one
-fold after another on one thread (n_jobs=1). The ratio ``speedup_vs_reference`` is what
+fold after another on one thread (n_jobs=1); the speed weight's, the novelty test's and the
+final fit take the one preparation in both. The ratio ``speedup_vs_reference`` is what
 reusing per-demonstration work across folds, batching the pattern fits and running the folds
 on both cores gain; ``same_selection`` whether both chose the same K and floor with curves
 equal to 1e-9.
@@ -31,38 +33,29 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
-KEYS = ('train_s', 'load_s', 'selection_s', 'patterns_s', 'heldout_s', 'novelty_s', 'fit_s',
-        'save_s', 'peak_rss_mb', 'n_fits')
+KEYS = ('train_s', 'load_s', 'prepare_s', 'selection_s', 'patterns_s', 'heldout_s', 'speed_s',
+        'novelty_s', 'fit_s', 'save_s', 'peak_rss_mb', 'n_fits')
+# The JSON's keys for training's stages (app.training.Stages, info['seconds']).
+STAGES = {'prepare_s': 'preparing', 'patterns_s': 'choosing K', 'heldout_s': 'covariance floor',
+          'speed_s': 'speed weight', 'fit_s': 'final fit', 'novelty_s': 'novelty',
+          'save_s': 'saving'}
 
 
-class Phases:
-    """Inclusive wall time and call count of wrapped functions; a call made inside another
-    wrapped call of a different phase is counted but not timed under its own key (the final
-    fit is a fit outside the selection and the novelty calibration)."""
+def count_calls(owner, name, counter):
+    """Count the calls of owner.name in counter[0], from any thread."""
+    original, lock = getattr(owner, name), threading.Lock()
 
-    def __init__(self):
-        self.seconds, self.calls, self.stack = {}, {}, []
-
-    def wrap(self, owner, name, key, timed=True):
-        original = getattr(owner, name)
-
-        def wrapper(*args, **kwargs):
-            self.calls[key] = self.calls.get(key, 0) + 1
-            if not timed or (self.stack and key == 'fit'):
-                return original(*args, **kwargs)
-            self.stack.append(key)
-            t0 = time.perf_counter()
-            try:
-                return original(*args, **kwargs)
-            finally:
-                self.seconds[key] = self.seconds.get(key, 0.0) + time.perf_counter() - t0
-                self.stack.pop()
-        setattr(owner, name, wrapper)
+    def wrapper(*args, **kwargs):
+        with lock:
+            counter[0] += 1
+        return original(*args, **kwargs)
+    setattr(owner, name, wrapper)
 
 
 def plain_heldout(demos, candidates, fractions=(), prior_scales=(), n_folds=5, progress=None,
@@ -128,15 +121,11 @@ def one_run(bags: Path, reference: bool) -> dict:
     from mixture_ip_ros.core import mixture, patterns
     from mixture_ip_ros.io.dataset import load_dataset
     from mixture_ip_ros.robot.description import load_description
-    phases = Phases()
+    fits = [0]
     if reference:
         training.calibrated_heldout_curves = plain_heldout
         patterns.PatternMixture._ecm = plain_ecm(patterns.PatternMixture._ecm)
-    phases.wrap(training, '_pattern_selection', 'patterns_s')
-    phases.wrap(training, 'calibrated_heldout_curves', 'heldout_s')
-    phases.wrap(training, 'calibrate_novelty', 'novelty_s')
-    phases.wrap(training, 'save_model', 'save_s')
-    phases.wrap(mixture.MixtureIProMP, 'fit', 'fit')
+    count_calls(mixture.MixtureIProMP, 'fit', fits)
     robot = load_description(None)
     t0 = time.perf_counter()
     demos, skipped = load_dataset(bags, joint_names=robot.joint_names,
@@ -149,14 +138,11 @@ def one_run(bags: Path, reference: bool) -> dict:
             n_jobs=1 if reference else None)
     t2 = time.perf_counter()
     sel = info['selection']
-    s = phases.seconds
-    return {'train_s': t2 - t1, 'load_s': t1 - t0,
-            'selection_s': s.get('patterns_s', 0.0) + s.get('heldout_s', 0.0),
-            'patterns_s': s.get('patterns_s', 0.0), 'heldout_s': s.get('heldout_s', 0.0),
-            'novelty_s': s.get('novelty_s', 0.0), 'fit_s': s.get('fit', 0.0),
-            'save_s': s.get('save_s', 0.0),
+    stage = {key: info['seconds'].get(name, 0.0) for key, name in STAGES.items()}
+    return {'train_s': t2 - t1, 'load_s': t1 - t0, **stage,
+            'selection_s': stage['patterns_s'] + stage['heldout_s'],
             'peak_rss_mb': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-            'n_fits': phases.calls.get('fit', 0), 'n_demonstrations': len(demos),
+            'n_fits': fits[0], 'n_demonstrations': len(demos),
             'n_skipped': len(skipped), 'chosen': sel['chosen'], 'prior_scale': sel['prior_scale'],
             'patterns_mean': sel['mean']}
 

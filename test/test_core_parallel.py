@@ -39,3 +39,18 @@ def test_progress_counts_every_piece_once_from_any_thread():
     count = ProgressCount(progress, 30)
     map_threads(lambda i: count.step(i % 3), range(30), 4)
     assert [d for d, _, _ in seen] == list(range(1, 31)) and {t for _, t, _ in seen} == {30}
+
+
+def test_the_cores_available_are_the_affinity_or_fewer_under_a_cgroup_quota(tmp_path):
+    import os
+    from mixture_ip_ros.core.parallel import available_cores
+    affinity = len(os.sched_getaffinity(0))
+    quota = tmp_path / 'cpu.max'
+    quota.write_text('max 100000\n')
+    assert available_cores(quota) == affinity
+    quota.write_text('150000 100000\n')             # one and a half CPUs: one thread
+    assert available_cores(quota) == 1
+    quota.write_text(f'{(affinity + 8) * 100000} 100000\n')
+    assert available_cores(quota) == affinity
+    assert available_cores(tmp_path / 'none') == affinity
+    assert checked_jobs(__import__('numpy').int64(2)) == 2

@@ -168,3 +168,23 @@ def test_training_says_where_its_time_went_stage_by_stage(tmp_path):
     shown = terminal.getvalue().splitlines()
     assert shown[0] == 'preparing ...' and shown[1].startswith('preparing: ')
     assert len(shown) == 2 * len(names)
+
+
+def test_training_refuses_what_would_make_its_threads_or_shared_preparation_lie():
+    """A preparation of other demonstrations or parameters, a number of threads that is not
+    one, a random generator the folds' threads would share: each refused by name."""
+    from mixture_ip_ros.core.selection import prepare_for_cv
+    demos = mixture_demos(seed=0)[0][:12]
+    prepared = prepare_for_cv(demos, {'n_basis': 8})
+    for kwargs in ({'n_basis': 6}, {'n_basis': 8, 'smoothing': 0.5}):
+        with pytest.raises(ValueError, match='prepared was not made of these'):
+            train(demos, n_components=2, prepared=prepared, **kwargs)
+    with pytest.raises(ValueError, match='prepared was not made of these'):
+        train(demos[:10], n_components=2, n_basis=8, prepared=prepared)
+    with pytest.raises(ValueError, match='n_jobs must be a positive integer'):
+        train(demos, n_components=2, n_basis=8, n_jobs=0)
+    with pytest.raises(ValueError, match='random_state must be an integer seed'):
+        train(demos, n_components=2, n_basis=8, random_state=np.random.default_rng(0))
+    shared, _ = train(demos, n_components=2, n_basis=8, prepared=prepared, n_jobs=np.int64(2))
+    alone, _ = train(demos, n_components=2, n_basis=8, n_jobs=1)
+    assert np.array_equal(shared.means_, alone.means_)

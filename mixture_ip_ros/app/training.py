@@ -141,12 +141,20 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
     silently read as K = 1); info['seconds'] the time of each stage (``stages``, a
     :class:`Stages`, also shows them). The held-out folds run on ``n_jobs`` threads
     (core.parallel.map_threads; None: every core this process may use), with the same result
-    for any number. ``prepared``: what core.selection.prepare_for_cv made of ``demos`` with
-    these ``params`` and method 'regression', where the caller has it (else made here once,
-    when a stage needs it).
+    for any number; ``progress`` may be called from them, one call at a time, and
+    ``random_state`` is an integer seed (a generator would be shared by the threads).
+    ``prepared``: what core.selection.prepare_for_cv made of ``demos`` with these ``params``
+    and method 'regression', where the caller has it (else made here once, when a stage needs
+    it).
     """
     demos = list(demos)
     checked_jobs(n_jobs)
+    seed = params.get('random_state', 0)
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+        raise ValueError(f'random_state must be an integer seed, got {seed!r} (the held-out '
+                         'folds run on threads, which would share a generator)')
+    if prepared is not None:
+        _check_prepared(prepared, demos, params)
     stages = Stages() if stages is None else stages
     if criterion not in CRITERIA:
         raise ValueError(f'criterion must be one of {CRITERIA}, got {criterion!r}')
@@ -225,6 +233,22 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
     info['noise_var'] = np.asarray(model.noise_var_).tolist()
     info['seconds'] = dict(stages.seconds)
     return model, info
+
+
+def _check_prepared(prepared, demos, params):
+    """Refuse a ``prepared`` that was not made of these demonstrations with these
+    parameters: its weights would silently stand for other ones."""
+    n_basis = params.get('n_basis', _DEFAULT_N_BASIS)
+    dofs = demos[0].n_observed_dofs + demos[0].n_controlled_dofs if demos else 0
+    smoothing = params.get('smoothing')
+    if (prepared.smoothing is None or prepared.W.shape != (len(demos), dofs * n_basis)
+            or prepared.n_observed != demos[0].n_observed_dofs
+            or (smoothing is not None and not np.array_equal(
+                np.broadcast_to(np.asarray(smoothing, dtype=float), prepared.smoothing.shape),
+                prepared.smoothing))):
+        raise ValueError('prepared was not made of these demonstrations with these parameters '
+                         '(core.selection.prepare_for_cv(demos, params) with method '
+                         "'regression')")
 
 
 def _pattern_selection(data, candidates, params) -> dict:
@@ -406,8 +430,9 @@ def train_to_file(demos, out_path, layout: Layout = None, observed_frame: str = 
     if layout.observed == bag_layout().observed and layout.observed_units == ('m',) * 3:
         kwargs.setdefault('observation_noise', WRIST_OBSERVATION_NOISE)
     stages = kwargs.setdefault('stages', Stages())
+    checked_jobs(kwargs.get('n_jobs'))
     unsupervised = kwargs.get('labels') is None
-    if unsupervised or kwargs.get('method') != 'em':
+    if kwargs.get('prepared') is None and (unsupervised or kwargs.get('method') != 'em'):
         # Training's stages and the novelty folds below share it (train's ``prepared``).
         with stages('preparing'):
             kwargs['prepared'] = prepare_for_cv(demos, {**_model_params(kwargs),

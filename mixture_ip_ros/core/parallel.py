@@ -7,19 +7,30 @@ compiled kernels where a worker process would import the package and be sent the
 (most of a fold's second). A process forked from one that ran ROS nodes can also crash in
 their threads' objects (app.evaluation.interactions._run forks from a server instead). Each
 piece writes only its own results and they come back in the order of the items, so the
-result is the same whatever the number of threads.
+result is the same whatever the number of threads. A piece that draws random numbers seeds
+its own generator (an integer random_state), never a generator shared with the others.
 """
 
+import operator
 import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
 
 
-def available_cores() -> int:
-    """The number of cores this process may run on (its CPU affinity, not the machine's)."""
-    if hasattr(os, 'sched_getaffinity'):
-        return max(1, len(os.sched_getaffinity(0)))
-    return os.cpu_count() or 1
+def available_cores(cgroup: Path = Path('/sys/fs/cgroup/cpu.max')) -> int:
+    """The number of cores this process may run on: its CPU affinity, or fewer where its
+    control group's CPU quota allows less (a container given 2 CPUs of a 64-core host sees 64
+    in its affinity)."""
+    n = len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count()
+    n = max(1, n or 1)
+    try:
+        quota, period = cgroup.read_text().split()[:2]
+        if quota != 'max':
+            n = min(n, max(1, int(float(quota) // float(period))))
+    except (OSError, ValueError):
+        pass                            # no cgroup v2 quota: the affinity is the limit
+    return n
 
 
 def checked_jobs(n_jobs) -> int:
@@ -27,10 +38,14 @@ def checked_jobs(n_jobs) -> int:
     integer (a clear error otherwise)."""
     if n_jobs is None:
         return available_cores()
-    if isinstance(n_jobs, bool) or not isinstance(n_jobs, int) or n_jobs < 1:
+    try:
+        n = operator.index(n_jobs)
+    except TypeError:
+        n = 0
+    if isinstance(n_jobs, bool) or n < 1:
         raise ValueError(f'n_jobs must be a positive integer or None (every core), '
                          f'got {n_jobs!r}')
-    return n_jobs
+    return n
 
 
 def map_threads(fn, items, n_jobs=None) -> list:
