@@ -65,7 +65,7 @@ def test_expected_trajectory_is_the_speed_weighted_sum_of_the_plain_trajectories
     weights = rng.standard_normal((M, n, basis.n_basis))
     alphas, probs = rng.uniform(0.2, 1.5, M), rng.dirichlet(np.ones(M))
     times = np.linspace(-0.2, 4.0, 57)
-    pos, vel, acc = expected_trajectory(weights, alphas, probs, times, basis.centers,
+    pos, vel, acc = expected_trajectory(weights, alphas, alphas, probs, times, basis.centers,
                                         basis.width, True)
     ref = [np.zeros((len(times), n)) for _ in range(3)]
     for w, a, p in zip(weights, alphas, probs):
@@ -74,6 +74,13 @@ def test_expected_trajectory_is_the_speed_weighted_sum_of_the_plain_trajectories
             r += p * d[key]
     for got, want in zip((pos, vel, acc), ref):
         assert np.allclose(got, want, rtol=1e-10, atol=1e-12 * np.abs(want).max())
-    only, none_v, none_a = expected_trajectory(weights, alphas, probs, times, basis.centers,
-                                               basis.width, False)
+    only, none_v, none_a = expected_trajectory(weights, alphas, alphas, probs, times,
+                                               basis.centers, basis.width, False)
     assert np.array_equal(only, pos) and none_v.shape == none_a.shape == (0, n)
+    # one path at given phases
+    from mixture_ip_ros.core._fast import mean_trajectory
+    z = np.linspace(-0.3, 1.3, 41)
+    d = trajectory_distribution(weights[0].ravel(), None, basis, z, alphas[0])
+    for got, key in zip(mean_trajectory(weights[0], z, basis.centers, basis.width, alphas[0]),
+                        ('position', 'velocity', 'acceleration')):
+        assert np.allclose(got, d[key], rtol=1e-10, atol=1e-12 * np.abs(d[key]).max())

@@ -5,8 +5,8 @@ function it must equal, and the tests compare them (test_core_fast, test_core_on
 - kalman_update: one observation, every hypothesis; the recursive form of
   promp.weight_posterior (the batch conditioning, eqs. 3-5 and 17-18), equal to rounding;
 - basis_rows: GaussianBasis.__call__ (psi clamped to [0, 1]), equal to rounding;
-- mean_trajectory: the means of interaction.trajectory_distribution, equal to rounding;
-- expected_trajectory: their expectation over phase speeds, equal to rounding.
+- expected_trajectory: the means of interaction.trajectory_distribution (mean_trajectory), and
+  their expectation over phase speeds, equal to rounding.
 
 Kalman update. Per hypothesis h the observed-agent weights have N(mu_h, Sigma_h); the
 observation y = (I_P kron psi_h^T) w + e, e ~ N(0, diag(noise)). The update factors
@@ -370,51 +370,15 @@ def compact_lanes(a, src):
 
 
 @numba.njit(cache=True, nogil=True, fastmath=False, boundscheck=False)
-def mean_trajectory(weights, z, centers, width, alpha):
-    """Mean positions, velocities, accelerations (len(z), n) of the DOFs with ``weights`` (n, N)
-    at phases z for the phase speed alpha: eqs. 1-3 with GaussianBasis.evaluate's basis and its
-    clamping (psi held, derivatives zero outside [0, 1]), in one pass without temporaries."""
-    T, N, n = z.shape[0], centers.shape[0], weights.shape[0]
-    pos = np.zeros((T, n))
-    vel = np.zeros((T, n))
-    acc = np.zeros((T, n))
-    h = width * width
-    b = np.empty(N)
-    db = np.empty(N)
-    ddb = np.empty(N)
-    for t in range(T):
-        inside = 0.0 <= z[t] <= 1.0
-        zc = min(max(z[t], 0.0), 1.0)
-        s = ds = dds = 0.0
-        for i in range(N):
-            d = zc - centers[i]
-            b[i] = np.exp(-0.5 * d * d / h)
-            db[i] = -b[i] * d / h
-            ddb[i] = b[i] * (d * d / (h * h) - 1.0 / h)
-            s += b[i]
-            ds += db[i]
-            dds += ddb[i]
-        for i in range(N):
-            psi = b[i] / s
-            for j in range(n):
-                pos[t, j] += psi * weights[j, i]
-            if inside:
-                dpsi = (db[i] - psi * ds) / s
-                ddpsi = (ddb[i] - 2.0 * dpsi * ds - psi * dds) / s
-                for j in range(n):
-                    vel[t, j] += alpha * dpsi * weights[j, i]
-                    acc[t, j] += alpha * alpha * ddpsi * weights[j, i]
-    return pos, vel, acc
-
-
-
-@numba.njit(cache=True, nogil=True, fastmath=False, boundscheck=False)
-def expected_trajectory(weights, alphas, probs, times, centers, width, derivatives):
-    """sum_m probs[m] mean_trajectory(weights[m], alphas[m] times, ..., alphas[m]): the
-    expectation over phase-speed hypotheses of the mean paths (weights (M, n, N)), each
-    hypothesis's path formed as mean_trajectory forms it and added in the order of m, so equal
-    to rounding. Without ``derivatives`` the velocities and accelerations (then (0, n)) are not
-    computed: the basis's derivatives are two thirds of the work."""
+def expected_trajectory(weights, scales, rates, probs, times, centers, width, derivatives):
+    """sum_m probs[m] (the mean positions, velocities, accelerations (len(times), n) of the
+    DOFs with weights[m] (n, N) at the phases z = scales[m] times, moving at dz/dt = rates[m]):
+    eqs. 1-3 with GaussianBasis.evaluate's basis and its clamping (psi held, derivatives zero
+    outside [0, 1]), each path added in the order of m, in one pass without temporaries. The
+    expectation over phase-speed hypotheses alpha_m (scales = rates = alphas, times in s), or
+    one path at given phases (:func:`mean_trajectory`). Without ``derivatives`` the velocities
+    and accelerations (then (0, n)) are not computed: the basis's derivatives are two thirds
+    of the work."""
     M, n, N = weights.shape
     T = times.shape[0]
     Td = T if derivatives else 0
@@ -427,9 +391,9 @@ def expected_trajectory(weights, alphas, probs, times, centers, width, derivativ
     ddb = np.empty(N)
     row = np.empty((3, n))
     for m in range(M):
-        alpha, p = alphas[m], probs[m]
+        scale, rate, p = scales[m], rates[m], probs[m]
         for t in range(T):
-            z = alpha * times[t]
+            z = scale * times[t]
             inside = 0.0 <= z <= 1.0
             zc = min(max(z, 0.0), 1.0)
             s = ds = dds = 0.0
@@ -451,11 +415,23 @@ def expected_trajectory(weights, alphas, probs, times, centers, width, derivativ
                     dpsi = (db[i] - psi * ds) / s
                     ddpsi = (ddb[i] - 2.0 * dpsi * ds - psi * dds) / s
                     for j in range(n):
-                        row[1, j] += alpha * dpsi * weights[m, j, i]
-                        row[2, j] += alpha * alpha * ddpsi * weights[m, j, i]
+                        row[1, j] += rate * dpsi * weights[m, j, i]
+                        row[2, j] += rate * rate * ddpsi * weights[m, j, i]
             for j in range(n):
                 pos[t, j] += p * row[0, j]
                 if derivatives:
                     vel[t, j] += p * row[1, j]
                     acc[t, j] += p * row[2, j]
     return pos, vel, acc
+
+
+_ONE = np.ones(1)
+
+
+def mean_trajectory(weights, z, centers, width, alpha):
+    """Mean positions, velocities, accelerations (len(z), n) of the DOFs with ``weights`` (n, N)
+    at phases z for the phase speed alpha: :func:`expected_trajectory` of the one path (scale
+    1, probability 1: the same numbers)."""
+    return expected_trajectory(np.ascontiguousarray(weights)[None], _ONE,
+                               np.array([float(alpha)]), _ONE, np.asarray(z, dtype=float),
+                               centers, width, True)

@@ -531,7 +531,8 @@ class OnlineEstimator:
         mu_o = np.array([self._observed_mean(k, m) for m in speeds])
         mean_c = self.controlled_mean(k, mu_o).reshape(len(speeds), -1, self.n_basis)
         basis = self.model.basis_
-        pos, vel, acc = expected_trajectory(mean_c, self.alphas[speeds], probs, times,
+        alphas = self.alphas[speeds]
+        pos, vel, acc = expected_trajectory(mean_c, alphas, alphas, probs, times,
                                             basis.centers, basis.width, derivatives)
         return (k, pos, vel, acc) if derivatives else (k, pos, None, None)
 
