@@ -22,7 +22,7 @@ equal to 1e-9.
 
 Prints one JSON object.
 
-    OPENBLAS_NUM_THREADS=1 .venv/bin/python bench/train.py [--runs 3] [--reference-runs 1]
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python bench/train.py [--runs 3] [--reference-runs 3]
 """
 
 import argparse
@@ -169,7 +169,7 @@ def same_curves(a: dict, b: dict, rtol: float = 1e-9) -> bool:
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument('--runs', type=int, default=3)
-    p.add_argument('--reference-runs', type=int, default=1,
+    p.add_argument('--reference-runs', type=int, default=3,
                    help='runs of the straightforward loop (0: skip it)')
     p.add_argument('--one', type=Path, default=None, help=argparse.SUPPRESS)
     p.add_argument('--reference', action='store_true', help=argparse.SUPPRESS)
@@ -181,8 +181,14 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         bags = Path(tmp) / 'bags'
         write_scenario_bags('box_assembly', bags, seed=0)
-        runs = [run_in_process(bags, False) for _ in range(args.runs)]
-        refs = [run_in_process(bags, True) for _ in range(args.reference_runs)]
+        # Interleaved, so that a machine whose speed drifts over the minutes (a shared host)
+        # slows both alike and the ratio compares like with like.
+        runs, refs = [], []
+        for i in range(max(args.runs, args.reference_runs)):
+            if i < args.runs:
+                runs.append(run_in_process(bags, False))
+            if i < args.reference_runs:
+                refs.append(run_in_process(bags, True))
     out = {'scenario': 'box_assembly', 'n_demonstrations': runs[0]['n_demonstrations'],
            'candidates': list(range(1, 7)), 'chosen': runs[0]['chosen'],
            'prior_scale': runs[0]['prior_scale'], **medians(runs),
