@@ -210,8 +210,8 @@ def kalman_update(cov, mu, loglik, n, alpha_index, alphas, t, centers, width, y,
     cov (groups, d (d + 1) / 2 W), mu (groups, d W) (see the module's layout); per column c:
     loglik[c], phase speed alphas[alpha_index[c]] (H = I_P kron psi(alpha t)^T, eq. 15 with
     ``centers``, ``width``), log_prior[c], and which hypothesis it is, hypothesis[c]; noise
-    (groups, P W) = diag R of each column, in the lane layout (tied across components or not). joint (K M,): p(k, alpha_m | D) renormalised over the tracked hypotheses, 0 for
-    the others.
+    (groups, P W) = diag R of each column, in the lane layout (tied across components or not).
+    joint (K M,): p(k, alpha_m | D) renormalised over the tracked hypotheses, 0 for the others.
     """
     d = mu.shape[1] // W
     P = y.shape[0]
