@@ -153,13 +153,13 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
         raise ValueError(f'random_state must be an integer seed, got {seed!r} (the held-out '
                          'folds run on threads, which would share a generator)')
-    if prepared is not None:
-        _check_prepared(prepared, demos, params)
     stages = Stages() if stages is None else stages
     if criterion not in CRITERIA:
         raise ValueError(f'criterion must be one of {CRITERIA}, got {criterion!r}')
     if not demos:
         raise ValueError('no demonstrations to train on')
+    if prepared is not None:
+        _check_prepared(prepared, demos, params)
     has_controlled = demos[0].n_controlled_dofs > 0
     info = {'n_demonstrations': len(demos), 'n_observed_dofs': demos[0].n_observed_dofs,
             'n_controlled_dofs': demos[0].n_controlled_dofs}
@@ -176,12 +176,11 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
     curve_params = {**params, 'method': 'regression'}
     # What each demonstration is on its own (its weights, residuals, the set's smoothing):
     # made once, taken by every stage's folds and, for a regression model, the final fit.
-    shared = [prepared]
-
     def data():
-        if shared[0] is None:
-            shared[0] = prepare_for_cv(demos, curve_params)
-        return shared[0]
+        nonlocal prepared
+        if prepared is None:
+            prepared = prepare_for_cv(demos, curve_params)
+        return prepared
     n_fold = int(min(n_folds, len(demos)))
     n_train = len(demos) - int(np.ceil(len(demos) / max(n_fold, 1)))
     if n_components is None:
@@ -225,8 +224,8 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
         info['speed_scores'] = scores
     with stages('final fit'):
         model = MixtureIProMP(n_components=n_components, **params)
-        regression = model.method == 'regression' and shared[0] is not None
-        model.fit(shared[0] if regression else demos, labels=labels)
+        regression = model.method == 'regression' and prepared is not None
+        model.fit(prepared if regression else demos, labels=labels)
     info['n_components'] = int(n_components)
     info['prior_scale'] = float(model.prior_scale)
     info['speed_weight'] = float(model.speed_weight)
@@ -239,7 +238,7 @@ def _check_prepared(prepared, demos, params):
     """Refuse a ``prepared`` that was not made of these demonstrations with these
     parameters: its weights would silently stand for other ones."""
     n_basis = params.get('n_basis', _DEFAULT_N_BASIS)
-    dofs = demos[0].n_observed_dofs + demos[0].n_controlled_dofs if demos else 0
+    dofs = demos[0].n_observed_dofs + demos[0].n_controlled_dofs
     smoothing = params.get('smoothing')
     if (prepared.smoothing is None or prepared.W.shape != (len(demos), dofs * n_basis)
             or prepared.n_observed != demos[0].n_observed_dofs

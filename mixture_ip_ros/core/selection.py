@@ -278,36 +278,37 @@ def _heldout_scores(demonstrations, candidates, scales, n_folds, progress, fold_
         out['completion'], out['completion_rms'] = np.empty(shape), np.empty(shape)
         beginnings = beginning_stats(basis, demos, checked_fractions(fractions))
     counter = ProgressCount(progress, len(scales) * len(candidates) * (fold.max() + 1))
-    folds = [(data.take(fold != f), np.flatnonzero(fold == f)) for f in range(fold.max() + 1)]
+    # Each fold: its training set, the held-out rows and their statistics (and beginnings).
+    folds = []
+    for f in range(fold.max() + 1):
+        test = np.flatnonzero(fold == f)
+        folds.append((data.take(fold != f), test, data.take(test).stats,
+                      [st.take(test) for st in beginnings] if fractions else None))
+    keys = [(f, a) for f in range(len(folds)) for a in range(len(candidates))]
 
-    def start(task):
-        (train, _), K = task
-        if len(train.W) < K:
-            return None
-        return MixtureIProMP(n_components=K, **params).initial_clusters(train)
+    def start(key):
+        train, K = folds[key[0]][0], candidates[key[1]]
+        return (MixtureIProMP(n_components=K, **params).initial_clusters(train)
+                if len(train.W) >= K else None)
     # The k-means start of a fold's K is the same for every floor: made once, then every
     # (fold, K, floor) fit is a task of its own (more tasks than threads keeps both busy).
-    tasks = [((f, a), (folds[f], K)) for f in range(len(folds)) for a, K in enumerate(candidates)]
-    inits = dict(zip([key for key, _ in tasks], map_threads(start, [t for _, t in tasks], n_jobs)))
+    inits = dict(zip(keys, map_threads(start, keys, n_jobs)))
 
     def one_fit(task):
         f, a, b = task
-        (train, test), K = folds[f], candidates[a]
+        (train, test, test_stats, test_beginnings), K = folds[f], candidates[a]
         model = MixtureIProMP(n_components=K, **{**params, 'prior_scale': scales[b]})
         model.fit(train, init=inits[f, a])
-        out['loglik'][b, a, test] = model.score_statistics(data.take(test).stats,
-                                                           data.alphas[test])
+        out['loglik'][b, a, test] = model.score_statistics(test_stats, data.alphas[test])
         if 'controlled_rms' in out:
             out['controlled_rms'][b, a, test] = online_rms(model, [demos[i] for i in test])
         if fractions:
-            density, rms = completion_statistics(
-                model, data.take(test).stats, [st.take(test) for st in beginnings],
-                data.alphas[test])
+            density, rms = completion_statistics(model, test_stats, test_beginnings,
+                                                 data.alphas[test])
             out['completion'][b, a, test] = density.mean(axis=1)
             out['completion_rms'][b, a, test] = rms.mean(axis=1)
         counter.step(K)
-    map_threads(one_fit, [(f, a, b) for f in range(len(folds)) for a in range(len(candidates))
-                          for b in range(len(scales))], n_jobs)
+    map_threads(one_fit, [(f, a, b) for f, a in keys for b in range(len(scales))], n_jobs)
     return out
 
 
