@@ -159,6 +159,56 @@ def test_a_recording_offered_is_what_update_makes_of_it(model_and_demos):
         updated.update(t_next, [np.nan] * 3)
 
 
+def _state(est):
+    return (est.n_observations, est.n_skipped, est.t_last, est.t_seen, est.log_evidence_flat,
+            est.mu, est.sigma, est.joint_posterior(), np.array(est._times),
+            np.array(est._values))
+
+
+def _same_state(a, b):
+    return all(np.array_equal(x, y, equal_nan=True) for x, y in zip(_state(a), _state(b)))
+
+
+@pytest.mark.parametrize('prune_below', [0.0, 1e-3])
+def test_a_recording_offered_at_once_is_each_sample_offered_in_turn(model_and_demos,
+                                                                     prune_below):
+    """offer_many (a recording played to a cut: without pruning, every sample admitted in one
+    kernel pass, each group of hypotheses taking them all in turn) leaves the state offer()
+    leaves, to the bit, and returns log p(D) after each sample used."""
+    model, demos, _ = model_and_demos
+    each, many = (OnlineEstimator(model, n_alpha=7, min_interval=0.05, prune_below=prune_below)
+                  for _ in range(2))
+    t, y = demos[1].t, demos[1].observed
+    for lo, hi in ((0, 1), (1, 37), (37, 38), (38, 41), (41, 90)):   # one sample, none used, ...
+        marginals = []
+        for ti, yi in zip(t[lo:hi], y[lo:hi]):
+            if each.offer(ti, yi):
+                marginals.append(each.log_marginal())
+        got = many.offer_many(t[lo:hi], y[lo:hi])
+        assert np.array_equal(got, marginals)
+        assert _same_state(each, many)
+    assert many.n_observations == 18 and many.n_skipped == 72
+    assert len(many.offer_many([], np.zeros((0, 3)))) == 0 and _same_state(each, many)
+
+
+def test_a_bad_sample_offered_at_once_stops_where_offer_stops(model_and_demos):
+    """A NaN in a sample used, or a time that goes back: the samples before it are in, the
+    error is offer()'s, and the state is what offer() leaves."""
+    model, demos, _ = model_and_demos
+    t, y = demos[0].t[:40].copy(), demos[0].observed[:40].copy()
+    y[20] = np.nan                          # used (every 5th sample is)
+    y[22] = np.inf                          # skipped: never looked at
+    cases = [(t, y, 'NaN'), (np.r_[t[:10], t[5:15]], np.r_[y[:10], y[5:15]], 'increase')]
+    for times, values, message in cases:
+        each, many = (OnlineEstimator(model, n_alpha=5, min_interval=0.05) for _ in range(2))
+        with pytest.raises(ValueError, match=message):
+            for ti, yi in zip(times, values):
+                each.offer(ti, yi)
+        with pytest.raises(ValueError, match=message):
+            many.offer_many(times, values)
+        assert many.n_observations > 0 and _same_state(each, many)
+
+
 def test_online_rejects_bad_input(model_and_demos):
     model, _, _ = model_and_demos
     est = OnlineEstimator(model, n_alpha=5, min_interval=0.0)

@@ -2,7 +2,7 @@
 computation of the layer where the online estimator spends its time. Each says which plain
 function it must equal, and the tests compare them (test_core_fast, test_core_online):
 
-- kalman_update: one observation, every hypothesis; the recursive form of
+- kalman_update: observations in turn, every hypothesis; the recursive form of
   promp.weight_posterior (the batch conditioning, eqs. 3-5 and 17-18), equal to rounding;
 - basis_rows: GaussianBasis.__call__ (psi clamped to [0, 1]), equal to rounding;
 - expected_trajectory: the means of interaction.trajectory_distribution (mean_trajectory), and
@@ -200,12 +200,21 @@ def _tri(i, j):
 
 # 'contract' only: multiply-adds fused, no reassociation; every lane computed alike.
 @numba.njit(cache=True, nogil=True, fastmath={'contract'}, boundscheck=False)
-def kalman_update(cov, mu, loglik, n, alpha_index, alphas, t, centers, width, y, noise,
-                  log_prior, hypothesis, joint):
-    """One observation ``y`` at ``t`` s, in place for the first ``n`` columns (the tracked
-    hypotheses): Sigma and mu conditioned on y (eq. 4 in Kalman form), loglik += log N(y; H mu,
-    H Sigma H^T + R) (the factor of eq. 18), and the posterior (eq. 16) into ``joint``.
-    Returns the smallest posterior probability of a tracked hypothesis.
+def kalman_update(cov, mu, loglik, n, alpha_index, alphas, times, centers, width, ys, noise,
+                  log_prior, hypothesis, joint, trace):
+    """The observations ``ys`` (J, P) at ``times`` (J,) s, in that order, in place for the first
+    ``n`` columns (the tracked hypotheses): for each, Sigma and mu conditioned on y (eq. 4 in
+    Kalman form) and loglik += log N(y; H mu, H Sigma H^T + R) (the factor of eq. 18); then the
+    posterior (eq. 16) into ``joint``; ``trace`` (J, columns) gets each column's loglik after
+    each observation (what a caller needs to read between them, e.g. log p(D)). Returns the
+    smallest posterior probability of a tracked hypothesis.
+
+    Each group of W columns takes every observation before the next group starts: a group's
+    state (d (d + 1) / 2 W doubles, 66 kB at d = 45) stays in the core's cache for all of them,
+    where one observation at a time streams every group's state through memory once per
+    observation (1.2 MB at 150 hypotheses, more than a core's L2). Each column's arithmetic
+    and its order are those of J calls with one observation each, so the result is the same to
+    the bit; only the posterior in between is not computed (pruning needs it after each one).
 
     cov (groups, d (d + 1) / 2 W), mu (groups, d W) (see the module's layout); per column c:
     loglik[c], phase speed alphas[alpha_index[c]] (H = I_P kron psi(alpha t)^T, eq. 15 with
@@ -214,10 +223,17 @@ def kalman_update(cov, mu, loglik, n, alpha_index, alphas, t, centers, width, y,
     joint (K M,): p(k, alpha_m | D) renormalised over the tracked hypotheses, 0 for the others.
     """
     d = mu.shape[1] // W
-    P = y.shape[0]
+    J, P = ys.shape
     N = centers.shape[0]
-    psi = np.empty((alphas.shape[0], N))       # basis rows once per phase speed in use
-    done = np.zeros(alphas.shape[0], dtype=np.bool_)
+    # Basis rows once per (observation, phase speed in use).
+    used = np.zeros(alphas.shape[0], dtype=np.bool_)
+    for c in range(n):
+        used[alpha_index[c]] = True
+    psi = np.empty((J, alphas.shape[0], N))
+    for j in range(J):
+        for a in range(alphas.shape[0]):
+            if used[a]:
+                _basis_row(alphas[a] * times[j], centers, width, psi[j, a])
     phi = np.empty(N * W)
     n_rows = -(-P // 3) * 3                    # G in groups of three rows (extra rows zero)
     G = np.zeros(n_rows * d * W)
@@ -227,119 +243,12 @@ def kalman_update(cov, mu, loglik, n, alpha_index, alphas, t, centers, width, y,
         cov_g = cov[g]
         mu_g = mu[g]
         noise_g = noise[g]
-        for lane in range(W):
-            a = alpha_index[g * W + lane]
-            if not done[a]:
-                _basis_row(alphas[a] * t, centers, width, psi[a])
-                done[a] = True
-            for k in range(N):
-                phi[k * W + lane] = psi[a, k]
-        # H Sigma: G[p, j] = sum_k psi_k Sigma[pN + k, j], four columns j per pass.
-        for p in range(P):
-            j = 0
-            while j < d:
-                if j + 4 <= d:
-                    a0 = a1 = a2 = a3 = vsplat(0.0)
-                    for k in range(N):
-                        i = p * N + k
-                        f = vload(phi, k * W)
-                        a0 = a0 + f * vload(cov_g, _tri(i, j) * W)
-                        a1 = a1 + f * vload(cov_g, _tri(i, j + 1) * W)
-                        a2 = a2 + f * vload(cov_g, _tri(i, j + 2) * W)
-                        a3 = a3 + f * vload(cov_g, _tri(i, j + 3) * W)
-                    o = (p * d + j) * W
-                    vstore(G, o, a0)
-                    vstore(G, o + W, a1)
-                    vstore(G, o + 2 * W, a2)
-                    vstore(G, o + 3 * W, a3)
-                    j += 4
-                else:
-                    a0 = vsplat(0.0)
-                    for k in range(N):
-                        a0 = a0 + vload(phi, k * W) * vload(cov_g, _tri(p * N + k, j) * W)
-                    vstore(G, (p * d + j) * W, a0)
-                    j += 1
-        # S = H Sigma H^T + R (lower half) and the residual y - H mu.
-        for p in range(P):
-            for q in range(p + 1):
-                a0 = vload(noise_g, p * W) if q == p else vsplat(0.0)
-                for k in range(N):
-                    a0 = a0 + vload(G, (p * d + q * N + k) * W) * vload(phi, k * W)
-                vstore(L, (p * P + q) * W, a0)
-            a0 = vsplat(y[p])
-            for k in range(N):
-                a0 = a0 - vload(phi, k * W) * vload(mu_g, (p * N + k) * W)
-            vstore(r, p * W, a0)
-        # S = L L^T in place.
-        for i in range(P):
-            for j in range(i + 1):
-                a0 = vload(L, (i * P + j) * W)
-                for q in range(j):
-                    a0 = a0 - vload(L, (i * P + q) * W) * vload(L, (j * P + q) * W)
-                if i == j:
-                    a0 = vsqrt(a0)
-                else:
-                    a0 = a0 / vload(L, (j * P + j) * W)
-                vstore(L, (i * P + j) * W, a0)
-        # G = L^-1 H Sigma and r = L^-1 (y - H mu) in place.
-        for p in range(P):
-            inv = vsplat(1.0) / vload(L, (p * P + p) * W)
-            for j in range(d):
-                a0 = vload(G, (p * d + j) * W)
-                for q in range(p):
-                    a0 = a0 - vload(L, (p * P + q) * W) * vload(G, (q * d + j) * W)
-                vstore(G, (p * d + j) * W, a0 * inv)
-            a0 = vload(r, p * W)
-            for q in range(p):
-                a0 = a0 - vload(L, (p * P + q) * W) * vload(r, q * W)
-            vstore(r, p * W, a0 * inv)
-        # log N(y; H mu, S) = -(P log 2 pi + log det S + |r|^2) / 2, det S = prod L_pp^2.
-        for lane in range(W):
-            logdet, quad, prod = 0.0, 0.0, 1.0
-            for p in range(P):
-                prod *= L[(p * P + p) * W + lane]
-                if p % 8 == 7 or p == P - 1:   # L_pp^2 >= min(noise): 8 factors cannot underflow
-                    logdet += 2.0 * np.log(prod)
-                    prod = 1.0
-                quad += r[p * W + lane] ** 2
-            loglik[g * W + lane] += -0.5 * (P * _LOG_2PI + logdet + quad)
-        # mu += G^T r
-        for i in range(d):
-            a0 = vload(mu_g, i * W)
-            for p in range(P):
-                a0 = a0 + vload(G, (p * d + i) * W) * vload(r, p * W)
-            vstore(mu_g, i * W, a0)
-        # Sigma -= G^T G on the lower triangle: three rows of G, rows i and i + 1 of Sigma per
-        # pass (they share the loads of G[:, j]).
-        for c in range(0, n_rows, 3):
-            g0, g1, g2 = c * d * W, (c + 1) * d * W, (c + 2) * d * W
-            i = 0
-            while i < d:
-                a0, a1, a2 = vload(G, g0 + i * W), vload(G, g1 + i * W), vload(G, g2 + i * W)
-                base = i * (i + 1) // 2
-                if i + 1 < d:
-                    e0 = vload(G, g0 + (i + 1) * W)
-                    e1 = vload(G, g1 + (i + 1) * W)
-                    e2 = vload(G, g2 + (i + 1) * W)
-                    for j in range(i + 1):
-                        b0 = vload(G, g0 + j * W)
-                        b1 = vload(G, g1 + j * W)
-                        b2 = vload(G, g2 + j * W)
-                        o = (base + j) * W
-                        vstore(cov_g, o, vload(cov_g, o) - (a0 * b0 + a1 * b1 + a2 * b2))
-                        o += (i + 1) * W                     # entry (i + 1, j)
-                        vstore(cov_g, o, vload(cov_g, o) - (e0 * b0 + e1 * b1 + e2 * b2))
-                    o = (base + 2 * i + 2) * W              # entry (i + 1, i + 1)
-                    vstore(cov_g, o, vload(cov_g, o) - (e0 * e0 + e1 * e1 + e2 * e2))
-                    i += 2
-                else:
-                    for j in range(i + 1):
-                        b0 = vload(G, g0 + j * W)
-                        b1 = vload(G, g1 + j * W)
-                        b2 = vload(G, g2 + j * W)
-                        o = (base + j) * W
-                        vstore(cov_g, o, vload(cov_g, o) - (a0 * b0 + a1 * b1 + a2 * b2))
-                    i += 1
+        for obs in range(J):
+            y = ys[obs]
+            _absorb_one(cov_g, mu_g, noise_g, loglik, g, alpha_index, psi[obs], y, phi, G, L,
+                        r, d, P, N, n_rows)
+            for lane in range(W):
+                trace[obs, g * W + lane] = loglik[g * W + lane]
     # Posterior over the tracked hypotheses (eq. 16 with the mixture weight in the prior).
     top = -np.inf
     for c in range(n):
@@ -355,6 +264,123 @@ def kalman_update(cov, mu, loglik, n, alpha_index, alphas, t, centers, width, y,
         joint[hypothesis[c]] /= total
         smallest = min(smallest, joint[hypothesis[c]])
     return smallest
+
+
+@numba.njit(cache=True, nogil=True, fastmath={'contract'}, boundscheck=False, inline='always')
+def _absorb_one(cov_g, mu_g, noise_g, loglik, g, alpha_index, psi, y, phi, G, L, r, d, P, N,
+                n_rows):
+    """One observation ``y`` for the W columns of group g (kalman_update's body): ``psi``
+    (M, N) holds the basis row of each phase speed at its time."""
+    for lane in range(W):
+        a = alpha_index[g * W + lane]
+        for k in range(N):
+            phi[k * W + lane] = psi[a, k]
+    # H Sigma: G[p, j] = sum_k psi_k Sigma[pN + k, j], four columns j per pass.
+    for p in range(P):
+        j = 0
+        while j < d:
+            if j + 4 <= d:
+                a0 = a1 = a2 = a3 = vsplat(0.0)
+                for k in range(N):
+                    i = p * N + k
+                    f = vload(phi, k * W)
+                    a0 = a0 + f * vload(cov_g, _tri(i, j) * W)
+                    a1 = a1 + f * vload(cov_g, _tri(i, j + 1) * W)
+                    a2 = a2 + f * vload(cov_g, _tri(i, j + 2) * W)
+                    a3 = a3 + f * vload(cov_g, _tri(i, j + 3) * W)
+                o = (p * d + j) * W
+                vstore(G, o, a0)
+                vstore(G, o + W, a1)
+                vstore(G, o + 2 * W, a2)
+                vstore(G, o + 3 * W, a3)
+                j += 4
+            else:
+                a0 = vsplat(0.0)
+                for k in range(N):
+                    a0 = a0 + vload(phi, k * W) * vload(cov_g, _tri(p * N + k, j) * W)
+                vstore(G, (p * d + j) * W, a0)
+                j += 1
+    # S = H Sigma H^T + R (lower half) and the residual y - H mu.
+    for p in range(P):
+        for q in range(p + 1):
+            a0 = vload(noise_g, p * W) if q == p else vsplat(0.0)
+            for k in range(N):
+                a0 = a0 + vload(G, (p * d + q * N + k) * W) * vload(phi, k * W)
+            vstore(L, (p * P + q) * W, a0)
+        a0 = vsplat(y[p])
+        for k in range(N):
+            a0 = a0 - vload(phi, k * W) * vload(mu_g, (p * N + k) * W)
+        vstore(r, p * W, a0)
+    # S = L L^T in place.
+    for i in range(P):
+        for j in range(i + 1):
+            a0 = vload(L, (i * P + j) * W)
+            for q in range(j):
+                a0 = a0 - vload(L, (i * P + q) * W) * vload(L, (j * P + q) * W)
+            if i == j:
+                a0 = vsqrt(a0)
+            else:
+                a0 = a0 / vload(L, (j * P + j) * W)
+            vstore(L, (i * P + j) * W, a0)
+    # G = L^-1 H Sigma and r = L^-1 (y - H mu) in place.
+    for p in range(P):
+        inv = vsplat(1.0) / vload(L, (p * P + p) * W)
+        for j in range(d):
+            a0 = vload(G, (p * d + j) * W)
+            for q in range(p):
+                a0 = a0 - vload(L, (p * P + q) * W) * vload(G, (q * d + j) * W)
+            vstore(G, (p * d + j) * W, a0 * inv)
+        a0 = vload(r, p * W)
+        for q in range(p):
+            a0 = a0 - vload(L, (p * P + q) * W) * vload(r, q * W)
+        vstore(r, p * W, a0 * inv)
+    # log N(y; H mu, S) = -(P log 2 pi + log det S + |r|^2) / 2, det S = prod L_pp^2.
+    for lane in range(W):
+        logdet, quad, prod = 0.0, 0.0, 1.0
+        for p in range(P):
+            prod *= L[(p * P + p) * W + lane]
+            if p % 8 == 7 or p == P - 1:   # L_pp^2 >= min(noise): 8 factors cannot underflow
+                logdet += 2.0 * np.log(prod)
+                prod = 1.0
+            quad += r[p * W + lane] ** 2
+        loglik[g * W + lane] += -0.5 * (P * _LOG_2PI + logdet + quad)
+    # mu += G^T r
+    for i in range(d):
+        a0 = vload(mu_g, i * W)
+        for p in range(P):
+            a0 = a0 + vload(G, (p * d + i) * W) * vload(r, p * W)
+        vstore(mu_g, i * W, a0)
+    # Sigma -= G^T G on the lower triangle: three rows of G, rows i and i + 1 of Sigma per
+    # pass (they share the loads of G[:, j]).
+    for c in range(0, n_rows, 3):
+        g0, g1, g2 = c * d * W, (c + 1) * d * W, (c + 2) * d * W
+        i = 0
+        while i < d:
+            a0, a1, a2 = vload(G, g0 + i * W), vload(G, g1 + i * W), vload(G, g2 + i * W)
+            base = i * (i + 1) // 2
+            if i + 1 < d:
+                e0 = vload(G, g0 + (i + 1) * W)
+                e1 = vload(G, g1 + (i + 1) * W)
+                e2 = vload(G, g2 + (i + 1) * W)
+                for j in range(i + 1):
+                    b0 = vload(G, g0 + j * W)
+                    b1 = vload(G, g1 + j * W)
+                    b2 = vload(G, g2 + j * W)
+                    o = (base + j) * W
+                    vstore(cov_g, o, vload(cov_g, o) - (a0 * b0 + a1 * b1 + a2 * b2))
+                    o += (i + 1) * W                     # entry (i + 1, j)
+                    vstore(cov_g, o, vload(cov_g, o) - (e0 * b0 + e1 * b1 + e2 * b2))
+                o = (base + 2 * i + 2) * W              # entry (i + 1, i + 1)
+                vstore(cov_g, o, vload(cov_g, o) - (e0 * e0 + e1 * e1 + e2 * e2))
+                i += 2
+            else:
+                for j in range(i + 1):
+                    b0 = vload(G, g0 + j * W)
+                    b1 = vload(G, g1 + j * W)
+                    b2 = vload(G, g2 + j * W)
+                    o = (base + j) * W
+                    vstore(cov_g, o, vload(cov_g, o) - (a0 * b0 + a1 * b1 + a2 * b2))
+                i += 1
 
 
 @numba.njit(cache=True, nogil=True, boundscheck=False)

@@ -113,13 +113,13 @@ def held_out_statistics(model, demos, *, n_alpha: int, min_interval: float,
     for demo in demos:
         est.reset()
         monitor = NoveltyMonitor(NoveltyThresholds(np.zeros(1), 0.0, window_size, min_interval))
-        for row in observed_rows(demo):
-            if est.offer(float(demo.t[row]), demo.observed[row]):
-                monitor.record(est.n_observations, est.log_marginal())
-                p, w = monitor.statistics()
-                prefix.setdefault(est.n_observations, []).append(p)
-                if w is not None:
-                    windows.append(w)
+        rows = observed_rows(demo)
+        for n, log_p in enumerate(est.offer_many(demo.t[rows], demo.observed[rows]), start=1):
+            monitor.record(n, log_p)
+            p, w = monitor.statistics()
+            prefix.setdefault(n, []).append(p)
+            if w is not None:
+                windows.append(w)
     return [np.array(prefix[n]) for n in sorted(prefix)], np.array(windows)
 
 

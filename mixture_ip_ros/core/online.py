@@ -18,7 +18,7 @@ from scipy import linalg
 from ._fast import (W, basis_rows, compact_lanes, expected_trajectory, from_lanes,
                     kalman_update, mean_trajectory, to_lanes, tri_index)
 from .interaction import trajectory_distribution
-from .numerics import logsumexp
+from .numerics import logsumexp, logsumexp_rows
 from .phase import (alpha_grid, alpha_log_prior, log_density_on_grid, tempered_speed_posterior,
                     tempered_speed_weights)
 from .promp import observation_stats, weight_posterior
@@ -116,9 +116,14 @@ class OnlineEstimator:
 
     def reset(self):
         """Forget every observation: a new interaction starts (t = 0 at its onset)."""
-        self._cov = self._cov0.copy()
-        self._mu = self._mu0.copy()
-        self._noise = self._noise0.copy()
+        if not hasattr(self, '_cov'):
+            self._cov, self._mu, self._noise = (np.empty_like(a) for a in
+                                                (self._cov0, self._mu0, self._noise0))
+        # Into the same buffers: an evaluation resets once per recording, and a fresh 1.2 MB
+        # state each time costs its page faults again.
+        np.copyto(self._cov, self._cov0)
+        np.copyto(self._mu, self._mu0)
+        np.copyto(self._noise, self._noise0)
         self._hyp = self._hyp0.copy()                       # hypothesis held in each column
         self._loglik = np.zeros(len(self._hyp))
         self._alpha_index = self._hyp % len(self.alphas)    # phase speed of each column
@@ -197,16 +202,64 @@ class OnlineEstimator:
         self._absorb(t, y)
 
     def _absorb(self, t, y):
+        self._absorb_many(np.array([float(t)]), y[None])
+
+    def _absorb_many(self, times, values) -> np.ndarray:
+        """Condition on the samples ``values`` (J, P) at ``times`` (J,), checked, in order;
+        returns each tracked column's log evidence after each sample (J, n_tracked)."""
         joint = np.empty(len(self._col))
+        trace = np.empty((len(times), len(self._loglik)))
         basis = self.model.basis_
         self._smallest = kalman_update(self._cov, self._mu, self._loglik, self.n_tracked,
-                                       self._alpha_index, self.alphas, float(t), basis.centers,
-                                       basis.width, y, self._noise, self._prior, self._hyp, joint)
-        self.n_observations += 1
-        self._times.append(float(t))
-        self._values.append(y.copy())           # the caller may reuse its buffer
+                                       self._alpha_index, self.alphas, times, basis.centers,
+                                       basis.width, values, self._noise, self._prior,
+                                       self._hyp, joint, trace)
+        self.n_observations += len(times)
+        self._times.extend(times.tolist())
+        self._values.extend(np.array(values))   # copies: the caller may reuse its buffer
         self._joint = joint.reshape(self.n_components, -1)
         self._joint.flags.writeable = False
+        return trace[:, :self.n_tracked]
+
+    def offer_many(self, times, values) -> np.ndarray:
+        """:meth:`offer` of each sample in turn, with the same result (and the same error at
+        the same sample); returns :meth:`log_marginal` after each sample used (one per sample
+        used). Without pruning nothing is read between the samples: the ones admitted are
+        absorbed in one pass (core._fast.kalman_update keeps each group of hypotheses in cache
+        for all of them). A recording played back to a cut or to its end."""
+        times = np.asarray(times, dtype=float)
+        if self.prune_below > 0.0 or not self._ordered(times):
+            return self._offer_each(times, values)
+        # The decimation of admit(), on times checked above to be finite and increasing.
+        picked, last = [], self.t_last
+        for i, t in enumerate(times.tolist()):
+            if last is None or spaced(t, last, self.min_interval):
+                picked.append(i)
+                last = t
+        if not picked:
+            self.n_skipped += len(times)
+            self.t_seen = max(float(times[-1]), self.t_seen)
+            return np.empty(0)
+        ys = np.asarray(values, dtype=float)[picked]
+        if ys.ndim != 2 or ys.shape[1] != self.n_observed or not np.isfinite(ys).all():
+            return self._offer_each(times, values)
+        self.n_skipped += len(times) - len(picked)
+        self.t_last = last
+        self.t_seen = float(times[-1]) if self.t_seen is None else max(float(times[-1]),
+                                                                      self.t_seen)
+        trace = self._absorb_many(times[picked], ys)
+        return logsumexp_rows(self._prior[:self.n_tracked] + trace)   # log_marginal's sum
+
+    def _offer_each(self, times, values) -> np.ndarray:
+        return np.array([self.log_marginal() for t, y in zip(times, values)
+                         if self.offer(t, y)])
+
+    def _ordered(self, times) -> bool:
+        """Whether ``times`` are finite, >= 0, increasing and after the last one used: what
+        admit() would accept of each."""
+        return (times.ndim == 1 and bool(np.isfinite(times).all()) and len(times) > 0
+                and times[0] >= 0 and bool(np.all(np.diff(times) > 0))
+                and (self.t_last is None or times[0] > self.t_last))
 
     def prune(self) -> int:
         """Drop the tracked hypotheses whose posterior is now below ``prune_below`` (update
@@ -562,13 +615,14 @@ def observed_rows(demo) -> np.ndarray:
 def feed_until(est, demo, rows, j, t_max) -> int:
     """Feed ``est`` the observed samples ``rows[j:]`` (:func:`observed_rows`) of ``demo`` up to
     ``t_max`` s after onset, as the estimator node is fed them one by one
-    (:meth:`OnlineEstimator.update`); returns the index into ``rows`` of the first sample not
-    fed (:meth:`OnlineEstimator.offer`). The one way every evaluation, calibration and bench
-    plays a recording to the estimator up to a time."""
-    while j < len(rows) and demo.t[rows[j]] <= t_max + 1e-9:
-        est.offer(float(demo.t[rows[j]]), demo.observed[rows[j]])
-        j += 1
-    return j
+    (:meth:`OnlineEstimator.offer_many`); returns the index into ``rows`` of the first sample
+    not fed. The one way every evaluation, calibration and bench plays a recording to the
+    estimator up to a time."""
+    end = j
+    while end < len(rows) and demo.t[rows[end]] <= t_max + 1e-9:
+        end += 1
+    est.offer_many(demo.t[rows[j:end]], demo.observed[rows[j:end]])
+    return end
 
 
 # The speed weights training chooses from, and the points of a movement it scores them at.
