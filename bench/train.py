@@ -22,7 +22,7 @@ equal to 1e-9.
 
 Prints one JSON object.
 
-    OPENBLAS_NUM_THREADS=1 .venv/bin/python bench/train.py [--runs 3] [--reference-runs 3]
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python bench/train.py [--runs 5] [--reference-runs 5]
 """
 
 import argparse
@@ -168,8 +168,8 @@ def same_curves(a: dict, b: dict, rtol: float = 1e-9) -> bool:
 
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument('--runs', type=int, default=3)
-    p.add_argument('--reference-runs', type=int, default=3,
+    p.add_argument('--runs', type=int, default=5)
+    p.add_argument('--reference-runs', type=int, default=5,
                    help='runs of the straightforward loop (0: skip it)')
     p.add_argument('--one', type=Path, default=None, help=argparse.SUPPRESS)
     p.add_argument('--reference', action='store_true', help=argparse.SUPPRESS)
