@@ -191,6 +191,19 @@ def test_a_recording_offered_at_once_is_each_sample_offered_in_turn(model_and_de
     assert len(many.offer_many([], np.zeros((0, 3)))) == 0 and _same_state(each, many)
 
 
+def test_the_lanes_past_the_tracked_hypotheses_stay_valid_states(model_and_demos):
+    """Pruning leaves the last group's lanes past the tracked columns with the phase speeds of
+    hypotheses no longer tracked; the kernel updates them with the others, so their basis rows
+    are computed too and their states stay finite."""
+    model, demos, _ = model_and_demos
+    est = OnlineEstimator(model, n_alpha=7, min_interval=0.05, prune_below=1e-3)
+    est.offer_many(demos[2].t, demos[2].observed)
+    groups = -(-est.n_tracked // 8)
+    assert est.n_tracked % 8 and groups < len(est._cov)        # a part-filled last group
+    for state in (est._cov, est._mu):
+        assert np.isfinite(state[:groups]).all()
+
+
 def test_a_bad_sample_offered_at_once_stops_where_offer_stops(model_and_demos):
     """A NaN in a sample used, or a time that goes back: the samples before it are in, the
     error is offer()'s, and the state is what offer() leaves."""
@@ -207,6 +220,8 @@ def test_a_bad_sample_offered_at_once_stops_where_offer_stops(model_and_demos):
         with pytest.raises(ValueError, match=message):
             many.offer_many(times, values)
         assert many.n_observations > 0 and _same_state(each, many)
+    with pytest.raises(ValueError, match='3 times for 2 samples'):
+        many.offer_many(t[30:33], y[30:32])
 
 
 def test_online_rejects_bad_input(model_and_demos):

@@ -225,9 +225,10 @@ def kalman_update(cov, mu, loglik, n, alpha_index, alphas, times, centers, width
     d = mu.shape[1] // W
     J, P = ys.shape
     N = centers.shape[0]
-    # Basis rows once per (observation, phase speed in use).
+    # Basis rows once per (observation, phase speed in use), the lanes past the n-th column
+    # in the last group included: they are updated with the others and must stay valid.
     used = np.zeros(alphas.shape[0], dtype=np.bool_)
-    for c in range(n):
+    for c in range(-(-n // W) * W):
         used[alpha_index[c]] = True
     psi = np.empty((J, alphas.shape[0], N))
     for j in range(J):

@@ -228,6 +228,8 @@ class OnlineEstimator:
         absorbed in one pass (core._fast.kalman_update keeps each group of hypotheses in cache
         for all of them). A recording played back to a cut or to its end."""
         times = np.asarray(times, dtype=float)
+        if len(values) != len(times):
+            raise ValueError(f'{len(times)} times for {len(values)} samples')
         if self.prune_below > 0.0 or not self._ordered(times):
             return self._offer_each(times, values)
         # The decimation of admit(), on times checked above to be finite and increasing.
