@@ -159,7 +159,7 @@ def test_online_rms_is_the_estimators_prediction_of_the_rest():
     """online_rms: the estimator fed the decimated samples up to each fraction (absorbed in one
     go, an order the recursive form does not depend on), its MAP component's expected path of
     the controlled agent over the rest; RMS over samples and DOFs, mean over the fractions."""
-    from mixture_ip_ros.app.evaluation.common import decimated_rows
+    from mixture_ip_ros.core.online import decimated_rows
     from mixture_ip_ros.core.online import OnlineEstimator
     demos = mixture_demos(seed=3, n_obs=2, n_ctrl=2, counts=(8, 9, 7))[0]
     model = MixtureIProMP(3, n_basis=8, speed_weight=0.2).fit(demos[3:])

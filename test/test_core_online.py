@@ -222,6 +222,14 @@ def test_a_bad_sample_offered_at_once_stops_where_offer_stops(model_and_demos):
         assert many.n_observations > 0 and _same_state(each, many)
     with pytest.raises(ValueError, match='3 times for 2 samples'):
         many.offer_many(t[30:33], y[30:32])
+    # Rows as lists, a short one among the skipped (never read, as offer() never reads it);
+    # float32 stamps decimated alike.
+    rows = [list(r) for r in demos[0].observed[:12]]
+    rows[3] = [0.0]
+    stamps = np.float32(demos[0].t[:12] + 0.00056342216)
+    each, many = (OnlineEstimator(model, n_alpha=5, min_interval=0.05) for _ in range(2))
+    used = [each.offer(ti, yi) for ti, yi in zip(stamps, rows)]
+    assert len(many.offer_many(stamps, rows)) == sum(used) >= 2 and _same_state(each, many)
 
 
 def test_online_rejects_bad_input(model_and_demos):

@@ -203,11 +203,12 @@ def _tri(i, j):
 def kalman_update(cov, mu, loglik, n, alpha_index, alphas, times, centers, width, ys, noise,
                   log_prior, hypothesis, joint, trace):
     """The observations ``ys`` (J, P) at ``times`` (J,) s, in that order, in place for the first
-    ``n`` columns (the tracked hypotheses): for each, Sigma and mu conditioned on y (eq. 4 in
-    Kalman form) and loglik += log N(y; H mu, H Sigma H^T + R) (the factor of eq. 18); then the
-    posterior (eq. 16) into ``joint``; ``trace`` (J, columns) gets each column's loglik after
-    each observation (what a caller needs to read between them, e.g. log p(D)). Returns the
-    smallest posterior probability of a tracked hypothesis.
+    ``n`` columns (the tracked hypotheses; the rest of their last group is updated too): for
+    each, Sigma and mu conditioned on y (eq. 4 in Kalman form) and loglik += log N(y; H mu,
+    H Sigma H^T + R) (the factor of eq. 18); then the posterior (eq. 16) into ``joint``.
+    ``trace`` (J, columns) gets the loglik of the groups updated after each observation (what a
+    caller needs to read between them, e.g. log p(D)); its other columns are not written.
+    Returns the smallest posterior probability of a tracked hypothesis.
 
     Each group of W columns takes every observation before the next group starts: a group's
     state (d (d + 1) / 2 W doubles, 66 kB at d = 45) stays in the core's cache for all of them,
@@ -271,7 +272,7 @@ def kalman_update(cov, mu, loglik, n, alpha_index, alphas, times, centers, width
 def _absorb_one(cov_g, mu_g, noise_g, loglik, g, alpha_index, psi, y, phi, G, L, r, d, P, N,
                 n_rows):
     """One observation ``y`` for the W columns of group g (kalman_update's body): ``psi``
-    (M, N) holds the basis row of each phase speed at its time."""
+    (M, N) holds the basis row at its time of each phase speed in use."""
     for lane in range(W):
         a = alpha_index[g * W + lane]
         for k in range(N):

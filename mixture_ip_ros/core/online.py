@@ -35,6 +35,18 @@ def spaced(t: float, t_last: float, min_interval: float) -> bool:
     return t - t_last >= min_interval - 1e-9
 
 
+def decimated_rows(t, min_interval, last=None) -> np.ndarray:
+    """Indices of the samples the online estimator absorbs from increasing times ``t``, after
+    one used at ``last`` (None: none yet): the first, then each one at least ``min_interval``
+    after the last one absorbed (OnlineEstimator.admit, in float64)."""
+    rows = []
+    for i, ti in enumerate(np.asarray(t, dtype=float).tolist()):
+        if last is None or spaced(ti, last, min_interval):
+            rows.append(i)
+            last = ti
+    return np.array(rows, dtype=int)
+
+
 class OnlineEstimator:
     """Recursive p(k, alpha | D) for a fitted :class:`MixtureIProMP` (any layout: P >= 1
     observed DOFs, Q >= 0 controlled).
@@ -175,6 +187,7 @@ class OnlineEstimator:
         """
         if not np.isfinite(t):
             raise ValueError('observation time is NaN or Inf')
+        t = float(t)        # float32 stamps decimated as offer_many decimates them
         if t < 0:
             raise ValueError(f'time {t} is before the onset (t must be >= 0)')
         if self.t_last is not None:
@@ -232,21 +245,21 @@ class OnlineEstimator:
             raise ValueError(f'{len(times)} times for {len(values)} samples')
         if self.prune_below > 0.0 or not self._ordered(times):
             return self._offer_each(times, values)
-        # The decimation of admit(), on times checked above to be finite and increasing.
-        picked, last = [], self.t_last
-        for i, t in enumerate(times.tolist()):
-            if last is None or spaced(t, last, self.min_interval):
-                picked.append(i)
-                last = t
-        if not picked:
+        # admit()'s decimation, on times checked above to be finite and increasing.
+        picked = decimated_rows(times, self.min_interval, self.t_last)
+        if not len(picked):
             self.n_skipped += len(times)
             self.t_seen = max(float(times[-1]), self.t_seen)
             return np.empty(0)
-        ys = np.asarray(values, dtype=float)[picked]
-        if ys.ndim != 2 or ys.shape[1] != self.n_observed or not np.isfinite(ys).all():
-            return self._offer_each(times, values)
+        try:        # only the samples used are read, as offer() reads them
+            ys = np.array([values[i] for i in picked], dtype=float)
+        except (ValueError, TypeError):
+            ys = None
+        if ys is None or ys.ndim != 2 or ys.shape[1] != self.n_observed or \
+                not np.isfinite(ys).all():
+            return self._offer_each(times, values)     # offer()'s error at offer()'s sample
         self.n_skipped += len(times) - len(picked)
-        self.t_last = last
+        self.t_last = float(times[picked[-1]])
         self.t_seen = float(times[-1]) if self.t_seen is None else max(float(times[-1]),
                                                                       self.t_seen)
         trace = self._absorb_many(times[picked], ys)
@@ -616,9 +629,9 @@ def observed_rows(demo) -> np.ndarray:
 
 def feed_until(est, demo, rows, j, t_max) -> int:
     """Feed ``est`` the observed samples ``rows[j:]`` (:func:`observed_rows`) of ``demo`` up to
-    ``t_max`` s after onset, as the estimator node is fed them one by one
-    (:meth:`OnlineEstimator.offer_many`); returns the index into ``rows`` of the first sample
-    not fed. The one way every evaluation, calibration and bench plays a recording to the
+    ``t_max`` s after onset, as the estimator node would be fed them
+    (:meth:`OnlineEstimator.offer_many`: offer() of each in turn); returns the index into
+    ``rows`` of the first sample not fed. The one way every evaluation, calibration and bench plays a recording to the
     estimator up to a time."""
     end = j
     while end < len(rows) and demo.t[rows[end]] <= t_max + 1e-9:

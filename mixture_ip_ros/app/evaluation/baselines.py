@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from mixture_ip_ros.app.evaluation.common import decimated_rows, prefix_length
+from mixture_ip_ros.app.evaluation.common import prefix_length
+from mixture_ip_ros.core.online import decimated_rows
 from mixture_ip_ros.app.training import majority_names
 from mixture_ip_ros.core.basis import GaussianBasis
 from mixture_ip_ros.core.selection import cv_folds

@@ -19,7 +19,8 @@ from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.core.interaction import trajectory_distribution
 from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.selection import controlled_rms
-from mixture_ip_ros.core.online import OnlineEstimator, feed_until, observed_rows, spaced
+from mixture_ip_ros.core.online import (OnlineEstimator, decimated_rows, feed_until,
+                                        observed_rows)
 
 logger = logging.getLogger(__name__)
 
@@ -164,17 +165,6 @@ def online_component_given_end(model, demo, n_alpha=50, min_interval=0.05):
     rows = observed_rows(demo)
     feed_until(est, demo, rows, 0, demo.duration)
     return int(np.argmax(est.end_posterior(float(demo.t[rows[-1]]))))
-
-
-def decimated_rows(t, min_interval):
-    """Indices of the samples the online estimator absorbs from times ``t``: the first, then
-    each one at least ``min_interval`` after the last one absorbed (OnlineEstimator.admit)."""
-    rows, last = [], None
-    for i, ti in enumerate(t):
-        if last is None or spaced(ti, last, min_interval):
-            rows.append(i)
-            last = ti
-    return np.array(rows, dtype=int)
 
 
 def phase_known_components(model, demo, fractions, min_interval=0.05, duration=True):
