@@ -124,13 +124,12 @@ class OnlineEstimator:
                 B = linalg.cho_solve(linalg.cho_factor(C[:do, :do], lower=True), C[:do, do:]).T
             self._gain.append(B)
             self._cond_cov.append(C[do:, do:] - B @ C[:do, do:])
+        self._cov, self._mu, self._noise = (np.empty_like(a) for a in
+                                            (self._cov0, self._mu0, self._noise0))
         self.reset()
 
     def reset(self):
         """Forget every observation: a new interaction starts (t = 0 at its onset)."""
-        if not hasattr(self, '_cov'):
-            self._cov, self._mu, self._noise = (np.empty_like(a) for a in
-                                                (self._cov0, self._mu0, self._noise0))
         # Into the same buffers: an evaluation resets once per recording, and a fresh 1.2 MB
         # state each time costs its page faults again.
         np.copyto(self._cov, self._cov0)
@@ -631,8 +630,8 @@ def feed_until(est, demo, rows, j, t_max) -> int:
     """Feed ``est`` the observed samples ``rows[j:]`` (:func:`observed_rows`) of ``demo`` up to
     ``t_max`` s after onset, as the estimator node would be fed them
     (:meth:`OnlineEstimator.offer_many`: offer() of each in turn); returns the index into
-    ``rows`` of the first sample not fed. The one way every evaluation, calibration and bench plays a recording to the
-    estimator up to a time."""
+    ``rows`` of the first sample not fed. The one way every evaluation, calibration and bench
+    plays a recording to the estimator up to a time."""
     end = j
     while end < len(rows) and demo.t[rows[end]] <= t_max + 1e-9:
         end += 1

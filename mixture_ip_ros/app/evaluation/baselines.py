@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 
 from mixture_ip_ros.app.evaluation.common import prefix_length
-from mixture_ip_ros.core.online import decimated_rows
 from mixture_ip_ros.app.training import majority_names
 from mixture_ip_ros.core.basis import GaussianBasis
+from mixture_ip_ros.core.online import decimated_rows
 from mixture_ip_ros.core.selection import cv_folds
 from mixture_ip_ros.core.phase import log_evidence_batch
 from mixture_ip_ros.core.promp import expected_sq_residual, observation_stats, ridge_weights
