@@ -36,7 +36,7 @@ from mixture_ip_ros.app.evaluation.common import (decimated_rows,  # noqa: E402
 from mixture_ip_ros.app.evaluation.gestures import GESTURE_FRACTIONS  # noqa: E402
 from mixture_ip_ros.core.interaction import trajectory_distribution  # noqa: E402
 from mixture_ip_ros.core.mixture import MixtureIProMP  # noqa: E402
-from mixture_ip_ros.core.online import OnlineEstimator, feed_until, observed_rows  # noqa: E402
+from mixture_ip_ros.core.online import OnlineEstimator, prefixes  # noqa: E402
 from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE  # noqa: E402
 from mixture_ip_ros.scenarios.folders import generate  # noqa: E402
 from mixture_ip_ros.scenarios.letters import LETTER_OBSERVATION_NOISE, phase_letters  # noqa: E402
@@ -144,13 +144,11 @@ def box_assembly():
             demos[:i] + demos[i + 1:])
         names = majority_labels(model, demos[:i] + demos[i + 1:])
         q_true = kin.fk(test.controlled[-1])[0]
-        rows = observed_rows(test)
         labels.append(test.label)
         for v, (settings, refine) in variants.items():
             est = OnlineEstimator(model, **settings)
-            h, e, j = [], [], 0
-            for f in fr:
-                j = feed_until(est, test, rows, j, f * test.duration)
+            h, e = [], []
+            for _ in prefixes(est, test, np.multiply(fr, test.duration)):
                 k, a = est.map_hypothesis()
                 if refine:
                     a = est.refined_alpha(k)

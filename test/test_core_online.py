@@ -6,7 +6,7 @@ import pytest
 from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.core.interaction import condition_on_observed, trajectory_distribution
 from mixture_ip_ros.core.mixture import MixtureIProMP
-from mixture_ip_ros.core.online import OnlineEstimator
+from mixture_ip_ros.core.online import OnlineEstimator, prefixes
 from mixture_ip_ros.core.phase import (alpha_log_prior, alpha_m_step, alpha_prior_std,
                                        log_density_on_grid, log_evidence_batch,
                                        phase_posterior_batch, tempered_speed_posterior,
@@ -166,7 +166,8 @@ def _state(est):
 
 
 def _same_state(a, b):
-    return all(np.array_equal(x, y, equal_nan=True) for x, y in zip(_state(a), _state(b)))
+    return all(x is y or np.array_equal(x, y, equal_nan=True)     # None: nothing yet
+               for x, y in zip(_state(a), _state(b)))
 
 
 @pytest.mark.parametrize('prune_below', [0.0, 1e-3])
@@ -189,6 +190,31 @@ def test_a_recording_offered_at_once_is_each_sample_offered_in_turn(model_and_de
         assert _same_state(each, many)
     assert many.n_observations == 18 and many.n_skipped == 72
     assert len(many.offer_many([], np.zeros((0, 3)))) == 0 and _same_state(each, many)
+
+
+def test_a_recording_played_to_cuts_is_offer_of_each_sample_to_each_cut(model_and_demos):
+    """prefixes (the one way a recording is played to the estimator): reset, then after the
+    samples up to each cut (the sample at a cut included, a cut between samples or before the
+    first, cuts repeated) the state offer() of each observed sample leaves; a sample with the
+    observed agent missing is not offered."""
+    model, demos, _ = model_and_demos
+    observed = demos[1].observed.copy()
+    observed[7] = np.nan                       # the observed agent missing at one sample
+    demo = Demonstration(demos[1].t, observed, demos[1].controlled)
+    played, each = (OnlineEstimator(model, n_alpha=7, min_interval=0.05) for _ in range(2))
+    played.offer(100.0, demo.observed[0])      # before the play: reset forgets it
+    cuts = [-1.0, demo.t[3], demo.t[3], 0.5 * (demo.t[40] + demo.t[41]), demo.duration]
+    done = 0
+    for cut, got in zip(cuts, prefixes(played, demo, cuts)):
+        assert got == cut
+        for i in range(done, len(demo.t)):
+            if demo.t[i] > cut + 1e-9:
+                break
+            if np.isfinite(demo.observed[i]).all():
+                each.offer(demo.t[i], demo.observed[i])
+            done = i + 1
+        assert _same_state(each, played)
+    assert played.n_observations + played.n_skipped == len(demo.t) - 1
 
 
 def test_the_lanes_past_the_tracked_hypotheses_stay_valid_states(model_and_demos):

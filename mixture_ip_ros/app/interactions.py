@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from mixture_ip_ros.app.training import text_progress, train_to_file
-from mixture_ip_ros.core.online import OnlineEstimator, feed_until, observed_rows
+from mixture_ip_ros.core.online import OnlineEstimator, played_to
 from mixture_ip_ros.io.bags import read_bag
 from mixture_ip_ros.io.dataset import (NoRecordedInterval, load_dataset, load_demonstration,
                                        segment_recording)
@@ -171,7 +171,7 @@ def offline_errors(model, scene, recording, bag, fraction: float) -> dict:
                                       transform=opts['transform'],
                                       segmentation=opts['segmentation'])
     est = OnlineEstimator(model, n_alpha=50, min_interval=0.05)
-    feed_until(est, demo, observed_rows(demo), 0, fraction * demo.duration)
+    played_to(est, demo, fraction * demo.duration)
     rest = demo.t >= fraction * demo.duration
     # the expected path as the nodes plan it; at t = inf every speed hypothesis has ended
     q = est.expected_controlled(np.r_[demo.t[rest], np.inf])[1]

@@ -626,17 +626,29 @@ def observed_rows(demo) -> np.ndarray:
     return np.flatnonzero(~np.isnan(demo.observed).any(axis=1))
 
 
-def feed_until(est, demo, rows, j, t_max) -> int:
-    """Feed ``est`` the observed samples ``rows[j:]`` (:func:`observed_rows`) of ``demo`` up to
-    ``t_max`` s after onset, as the estimator node would be fed them
-    (:meth:`OnlineEstimator.offer_many`: offer() of each in turn); returns the index into
-    ``rows`` of the first sample not fed. The one way every evaluation, calibration and bench
-    plays a recording to the estimator up to a time."""
-    end = j
-    while end < len(rows) and demo.t[rows[end]] <= t_max + 1e-9:
-        end += 1
-    est.offer_many(demo.t[rows[j:end]], demo.observed[rows[j:end]])
-    return end
+def prefixes(est, demo, cuts):
+    """Play ``demo``'s observed agent to ``est`` from its onset as the estimator node would be
+    fed it (:meth:`OnlineEstimator.offer_many`: offer() of each sample in turn), stopping at
+    each of the increasing ``cuts`` (s since onset): a generator that resets ``est`` and, after
+    the samples up to each cut are in, yields that cut (the estimator then holds that
+    beginning of the recording). The one way every evaluation, calibration and bench plays a
+    recording to the estimator."""
+    est.reset()
+    rows = observed_rows(demo)
+    t = demo.t[rows]
+    j = 0
+    for t_max in cuts:
+        end = int(np.searchsorted(t, t_max + 1e-9, side='right'))
+        if end > j:
+            est.offer_many(t[j:end], demo.observed[rows[j:end]])
+            j = end
+        yield t_max
+
+
+def played_to(est, demo, t_max):
+    """:func:`prefixes` to one cut: ``est`` reset and fed ``demo`` up to ``t_max`` s."""
+    for _ in prefixes(est, demo, (t_max,)):
+        pass
 
 
 # The speed weights training chooses from, and the points of a movement it scores them at.
@@ -655,10 +667,7 @@ def speed_log_scores(model, demonstrations, weights=SPEED_WEIGHTS, fractions=SPE
     est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval)
     total, n = np.zeros(len(weights)), 0
     for demo in demonstrations:
-        est.reset()
-        rows, j = observed_rows(demo), 0
-        for f in fractions:
-            j = feed_until(est, demo, rows, j, f * demo.duration)
+        for _ in prefixes(est, demo, np.multiply(fractions, demo.duration)):
             if not est.n_observations:
                 continue
             terms = est._speed_terms(est.map_hypothesis()[0])
@@ -685,12 +694,9 @@ def prefix_predictions(est, demo, fractions) -> list:
     (:meth:`OnlineEstimator.expected_controlled`) at the samples after f T where it was
     recorded, and the MAP phase speed. One estimator serves every recording of a model
     (building one is most of the cost of a short recording)."""
-    est.reset()
-    rows = observed_rows(demo)
     recorded = ~np.isnan(demo.controlled).any(axis=1)
-    out, j = [], 0
-    for f in fractions:
-        j = feed_until(est, demo, rows, j, f * demo.duration)
+    out = []
+    for f, _ in zip(fractions, prefixes(est, demo, np.multiply(fractions, demo.duration))):
         rest = np.flatnonzero((demo.t > f * demo.duration + 1e-9) & recorded)
         k, alpha = est.map_hypothesis()
         pred = (est.expected_controlled(demo.t[rest], component=k, derivatives=False)[1]

@@ -18,7 +18,7 @@ from mixture_ip_ros.app.evaluation.common import (REPORT_FRACTIONS, EvalConfig,
                                                   rms_vs_k_dict, trained, with_default_noise)
 from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.selection import select_n_components
-from mixture_ip_ros.core.online import OnlineEstimator, feed_until, observed_rows
+from mixture_ip_ros.core.online import OnlineEstimator, prefixes
 from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE
 from mixture_ip_ros.robot.kinematics import RobotKinematics
 from mixture_ip_ros.viz import plots
@@ -79,10 +79,7 @@ def evaluate_box_assembly(demos, out_dir: Path, config: EvalConfig = None,
         posteriors.append(post)
         # Online: the first x % of the wrist stream, phase unknown.
         est = OnlineEstimator(model, n_alpha=config.n_alpha, min_interval=config.min_interval)
-        rows = observed_rows(test)
-        j = 0
-        for c, f in enumerate(fractions):
-            j = feed_until(est, test, rows, j, f * test.duration)
+        for c, _ in enumerate(prefixes(est, test, np.multiply(fractions, test.duration))):
             if est.n_observations == 0:
                 continue
             # the final posture the plan heads for: every phase speed's, weighted by its

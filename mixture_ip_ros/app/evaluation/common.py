@@ -19,8 +19,8 @@ from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.core.interaction import trajectory_distribution
 from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.selection import controlled_rms
-from mixture_ip_ros.core.online import (OnlineEstimator, decimated_rows, feed_until,
-                                        observed_rows)
+from mixture_ip_ros.core.online import (OnlineEstimator, decimated_rows, observed_rows,
+                                        played_to, prefixes)
 
 logger = logging.getLogger(__name__)
 
@@ -149,12 +149,8 @@ def online_components(model, demo, fractions, n_alpha=50, min_interval=0.05, **s
     fed ``demo`` sample by sample, phase unknown, after each fraction of the movement.
     ``settings``: further OnlineEstimator arguments (e.g. alpha_range_std)."""
     est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval, **settings)
-    rows = observed_rows(demo)
-    out, j = [], 0
-    for f in fractions:
-        j = feed_until(est, demo, rows, j, f * demo.duration)
-        out.append(int(np.argmax(est.component_posterior())))
-    return out
+    return [int(np.argmax(est.component_posterior()))
+            for _ in prefixes(est, demo, np.multiply(fractions, demo.duration))]
 
 
 def online_component_given_end(model, demo, n_alpha=50, min_interval=0.05):
@@ -162,9 +158,8 @@ def online_component_given_end(model, demo, n_alpha=50, min_interval=0.05):
     sample by sample (phase unknown) and is told when it ended (the observer's 'end' event, at
     its last sample): OnlineEstimator.end_posterior, where the phase is 1."""
     est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval)
-    rows = observed_rows(demo)
-    feed_until(est, demo, rows, 0, demo.duration)
-    return int(np.argmax(est.end_posterior(float(demo.t[rows[-1]]))))
+    played_to(est, demo, demo.duration)
+    return int(np.argmax(est.end_posterior(float(demo.t[observed_rows(demo)[-1]]))))
 
 
 def phase_known_components(model, demo, fractions, min_interval=0.05, duration=True):

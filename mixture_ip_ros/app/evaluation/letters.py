@@ -15,7 +15,7 @@ from scipy import linalg
 from mixture_ip_ros.app.evaluation.common import (EvalConfig, observed_prediction,
                                                   trained, with_default_noise)
 from mixture_ip_ros.core.mixture import MixtureIProMP
-from mixture_ip_ros.core.online import OnlineEstimator, feed_until, observed_rows
+from mixture_ip_ros.core.online import OnlineEstimator, prefixes
 from mixture_ip_ros.core.promp import observation_stats, weight_posterior
 from mixture_ip_ros.scenarios.letters import LETTER_OBSERVATION_NOISE
 from mixture_ip_ros.viz import plots
@@ -36,15 +36,12 @@ def letter_completion(model, test, fractions, n_alpha=50, min_interval=0.05, kee
     complete the letter. Returns RMS (len(fractions),), MAP alpha (len(fractions),), and for the
     fractions in ``keep`` a snapshot {fraction: (pred mean, pred cov, alpha posterior)}."""
     est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval)
-    rows = observed_rows(test)
     n = test.t.size
     rms = np.full(len(fractions), np.nan)
     alpha = np.full(len(fractions), np.nan)
     snaps = {}
-    j = 0
-    for c, f in enumerate(fractions):
-        last = int(np.ceil(f * n)) - 1
-        j = feed_until(est, test, rows, j, test.t[max(last, 0)])
+    ends = [max(int(np.ceil(f * n)) - 1, 0) for f in fractions]   # the thesis's time steps
+    for c, (f, last, _) in enumerate(zip(fractions, ends, prefixes(est, test, test.t[ends]))):
         if est.n_observations == 0:
             continue
         snap = any(abs(f - k) < 1e-9 for k in keep)
