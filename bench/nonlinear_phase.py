@@ -1,122 +1,246 @@
-"""Experiment: the thesis's non-linear phase (section 4.2.2, eq. 34, its future work) on the
-gestures, against the linear phase z = t / T. Prints one JSON object.
+"""Experiment: does a phase that bends (the thesis's future work, section 4.2.2, eq. 34) predict
+the partner better on the real interactions (NuiSI v1 and v2)? Prints one JSON object.
 
-Phase z = g(u; beta), u = t / T: a monotone warp from positive sigmoid basis functions plus a
-linear term (eq. 34 with phi(t) sigmoids, normalised so that g(0) = 0 and g(1) = 1; beta = 0
-is the linear phase). Training alternates: fit the mixture on the current phases, then give
-every demonstration the beta that maximises log p(D_i | k_i, beta) + log p(beta) under its own
-component (beta_j = exp(b_j), b ~ N(0, prior_sd^2)). Testing (phase known up to the warp: T is
-known, beta is not) scores each component by max_beta log p(D | k, beta) + log p(beta), on the
-first fraction of the movement. Labels never reach the unsupervised fit.
+The phase z = g(t / T; b) is a monotone warp with z(0) = 0, z(1) = 1: g(u) = int_0^u r / int_0^1 r,
+the relative phase rate r(s) = exp(sum_j b_j phi_j(s)) with Gaussian bumps phi_j (a monotone
+family by construction, Ramsay & Li 1998's; b = 0 is the linear phase z = t / T). Each
+demonstration's b is its MAP under its component, log p(D_i | k_i, b) + log N(b; 0, s^2 I) (the
+observed agent, weights marginalised: eq. 21), and a component's warp is the mean b of its
+members. On the same 5 stratified folds as `mixture-ip evaluate --scenario interactions`, the
+supervised mixture (one component per interaction, so that the clustering is not what is
+measured), partner RMS over the rest of the interaction after 30 / 50 / 70 % (mean over the
+held-out recordings, cm, as docs/results.md):
 
-    OPENBLAS_NUM_THREADS=1 python bench/nonlinear_phase.py [--supervised]
+- with the duration T known (oracles of the timing; the prefix conditions the weights): the
+  linear phase t / T; the recording's own warp (fitted on its whole observed path); its
+  component's mean warp; and the same three with the model trained on the registered
+  demonstrations (each training recording at its own warped phase: the alternation of EM over
+  weights and warps, one round);
+- online, T unknown, as the estimator node predicts (p(k, alpha | D) over the estimator's alpha
+  grid with z = g_k(alpha t), the speed marginalised under the tempered posterior of the
+  model's speed weight): linear (and the package's own OnlineEstimator, to check the batch
+  code), the component's mean warp, and the registered model with it; and the linear phase
+  under other speed weights (how much the prefix tells of the speed); and a speed that may
+  change at the present (the phase reached from the prefix's evidence, the rest of the
+  movement at the speeds of the prior or of a tempered posterior: the one-step version of a
+  phase velocity in the state).
+
+    OPENBLAS_NUM_THREADS=1 python bench/nonlinear_phase.py [--versions v1,v2]
 """
 
 import argparse
 import json
+import os
 import sys
 import time
 
-import numpy as np
-from scipy import linalg, optimize
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
-from mixture_ip_ros.app.training import majority_names
-from mixture_ip_ros.app.evaluation.common import prefix_length
-from mixture_ip_ros.core.demonstration import Demonstration
-from mixture_ip_ros.core.mixture import MixtureIProMP
-from mixture_ip_ros.core.promp import observation_stats, weight_posterior
-from mixture_ip_ros.scenarios.gestures import gesture_demonstrations
+import numpy as np  # noqa: E402
+from scipy import linalg, optimize  # noqa: E402
+from scipy.special import logsumexp  # noqa: E402
 
-CENTERS = np.array([0.2, 0.4, 0.6, 0.8])
-SLOPE = 0.08
+from mixture_ip_ros.app.evaluation.common import trained  # noqa: E402
+from mixture_ip_ros.app.evaluation.interactions import (interactions_config,  # noqa: E402
+                                                        stratified_folds)
+from mixture_ip_ros.core.demonstration import Demonstration  # noqa: E402
+from mixture_ip_ros.core.online import (SPEED_SUPPORT, OnlineEstimator,  # noqa: E402
+                                        decimated_rows, observed_rows, prefix_predictions)
+from mixture_ip_ros.core.phase import tempered_speed_posterior  # noqa: E402
+from mixture_ip_ros.core.promp import observation_stats, weight_posterior  # noqa: E402
+
+FRACTIONS = (0.3, 0.5, 0.7)
+N_WARP = 5                                   # bumps of the log phase rate
+CENTERS = np.linspace(0.0, 1.0, N_WARP)
+WIDTH = 1.0 / (N_WARP - 1)
+GRID = np.linspace(0.0, 1.0, 513)            # where g is integrated (trapezoids)
+ETAS = (1.0, 0.5, 0.2, 0.05, 0.0)
+# The speed may change now: the phase reached from one tempered posterior, the rest of the
+# movement at the speeds of another (0: the prior's).
+SPLITS = ((1.0, 0.0), (0.2, 0.0), (1.0, 0.2))
 
 
 def warp(u, b):
-    """g(u; beta) of eq. 34: linear + positive sigmoids, g(0) = 0, g(1) = 1, monotone."""
-    beta = np.exp(b)
-    sig = lambda x: 1.0 / (1.0 + np.exp(-(x[..., None] - CENTERS) / SLOPE))  # noqa: E731
-    s0, s1 = sig(np.zeros(1))[0], sig(np.ones(1))[0]
-    num = u + (sig(np.asarray(u)) - s0) @ beta
-    return num / (1.0 + (s1 - s0) @ beta)
+    """z = g(u; b) on [0, 1]; u outside [0, 1] is kept (before the onset, after the end)."""
+    rate = np.exp(np.exp(-0.5 * ((GRID[:, None] - CENTERS) / WIDTH) ** 2) @ b)
+    cum = np.r_[0.0, np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(GRID))]
+    u = np.asarray(u, dtype=float)
+    return np.where((u >= 0) & (u <= 1), np.interp(u, GRID, cum / cum[-1]), u)
 
 
-def loglik(model, k, z, y):
-    st = observation_stats(model.basis_, z, y)
-    do = model.n_observed_ * model.n_basis
-    chol = linalg.cho_factor(model.covariances_[k][:do, :do], lower=True)
-    noise = model.observed_noise_var_    # (P,) shared, or (K, P) per component
-    return weight_posterior(st, model.means_[k][:do], chol,
-                            noise if noise.ndim == 1 else noise[k])[2]
+class Observed:
+    """Component k's prior over the observed agent's weights and its noise at a sample spacing."""
+
+    def __init__(self, model, k, interval=None):
+        do = model.n_observed_ * model.n_basis
+        self.model, self.k = model, k
+        self.mean = model.means_[k][:do]
+        self.chol = linalg.cho_factor(model.covariances_[k][:do, :do], lower=True)
+        self.noise = model._observed_noise(k, interval)
+        C = model.covariances_[k]
+        self.gain = linalg.cho_solve(self.chol, C[:do, do:]).T   # controlled on observed
+
+    def posterior(self, z, y):
+        """(posterior mean of the observed weights, log p(D | k)) at phases z."""
+        mu, _, ll = weight_posterior(observation_stats(self.model.basis_, z, y), self.mean,
+                                     self.chol, self.noise)
+        return mu, ll
+
+    def partner(self, mu, z):
+        """The controlled agent's mean at phases z given the observed weights' mean mu."""
+        m = self.model
+        w = (m.means_[self.k][len(mu):] + self.gain @ (mu - self.mean)).reshape(-1, m.n_basis)
+        return m.basis_(np.clip(z, 0.0, 1.0)) @ w.T
 
 
-def best_warp(model, k, u, y, prior_sd, b0=None):
+def fit_warp(comp, demo, prior_sd):
+    """The MAP b of ``demo``'s observed path under ``comp``, and whether the optimiser converged
+    (a recording whose fit does not converge keeps the linear phase)."""
+    ok = ~np.isnan(demo.observed).any(axis=1)
+    u, y = demo.phase[ok], demo.observed[ok]
+
     def cost(b):
-        return -(loglik(model, k, warp(u, b), y) - 0.5 * np.sum(b ** 2) / prior_sd ** 2)
-    starts = [np.full(len(CENTERS), -3.0)] + ([b0] if b0 is not None else [])
-    best = min((optimize.minimize(cost, s, method='Powell',
-                                  options={'maxiter': 400, 'xtol': 1e-2, 'ftol': 1e-3})
-                for s in starts), key=lambda r: r.fun)
-    return best.x, -best.fun
+        return -(comp.posterior(warp(u, b), y)[1] - 0.5 * b @ b / prior_sd ** 2)
+    res = optimize.minimize(cost, np.zeros(N_WARP), method='L-BFGS-B')
+    good = bool(res.success and np.isfinite(res.fun))
+    return (res.x if good else np.zeros(N_WARP)), good
 
 
-def registered(demo, b):
-    T = demo.duration
-    return Demonstration(T * warp(demo.phase, b), demo.observed, None, demo.label, demo.name)
+def rms(pred, truth):
+    return float(np.sqrt(np.mean(np.sum((pred - truth) ** 2, axis=1))))
 
 
-def accuracy(model, names, tests, fractions, prior_sd, warped):
-    out = {}
-    for f in fractions:
-        ok = []
-        for d in tests:
-            n = max(prefix_length(d, f), 2)
-            u, y = d.phase[:n], d.observed[:n]
-            lp = np.log(model.weights_).copy()
-            for k in range(model.n_components):
-                lp[k] += (best_warp(model, k, u, y, prior_sd)[1] if warped
-                          else loglik(model, k, u, y))
-            ok.append(names[int(np.argmax(lp))] == d.label)
-        out[f'{f:g}'] = float(np.mean(ok))
+def online(model, warps, demo, config, etas):
+    """Partner RMS after each fraction, T unknown: {eta: [per fraction]} for the MAP component's
+    expected path over the speed grid, phases z = g_k(alpha t)."""
+    est = OnlineEstimator(model, n_alpha=config.n_alpha, min_interval=config.min_interval)
+    K, M = model.n_components, len(est.alphas)
+    log_prior = est._log_prior.reshape(K, M)
+    comps = [Observed(model, k, config.min_interval) for k in range(K)]
+    rows = observed_rows(demo)
+    used = rows[decimated_rows(demo.t[rows], config.min_interval)]
+    out = {eta: [] for eta in etas}
+    for f in FRACTIONS:
+        sel = used[demo.t[used] <= f * demo.duration + 1e-9]
+        t, y = demo.t[sel], demo.observed[sel]
+        evidence, mus = np.empty((K, M)), {}
+        for k in range(K):
+            for m, a in enumerate(est.alphas):
+                mus[k, m], evidence[k, m] = comps[k].posterior(warp(a * t, warps[k]), y)
+        k = int(np.argmax(logsumexp(log_prior + evidence, axis=1)))
+        rest = np.flatnonzero((demo.t > f * demo.duration + 1e-9)
+                              & ~np.isnan(demo.controlled).any(axis=1))
+        for eta in etas:
+            if isinstance(eta, tuple):      # (eta of the phase reached, eta of the rest's speed)
+                now, later = (speeds(evidence[k], log_prior[k], e) for e in eta)
+            else:
+                now = speeds(evidence[k], log_prior[k], model.speed_weight if eta is None else eta)
+                later = None
+            pred = 0.0
+            for m, pm in zip(*now):
+                if later is None:           # one speed from the onset to the end
+                    z = est.alphas[m] * demo.t[rest]
+                    pred = pred + pm * comps[k].partner(mus[k, m], warp(z, warps[k]))
+                    continue
+                for j, pj in zip(*later):   # the phase reached at t[-1], then another speed
+                    z = est.alphas[m] * t[-1] + est.alphas[j] * (demo.t[rest] - t[-1])
+                    pred = pred + pm * pj * comps[k].partner(mus[k, m], warp(z, warps[k]))
+            out[eta].append(rms(pred, demo.controlled[rest]))
     return out
+
+
+def speeds(evidence, log_prior, eta):
+    """The grid speeds holding the tempered posterior (OnlineEstimator.speed_hypotheses): their
+    indices and renormalised probabilities."""
+    p = np.exp(tempered_speed_posterior(evidence, log_prior, eta))
+    keep = np.flatnonzero(p >= SPEED_SUPPORT * p.max())
+    return keep, p[keep] / p[keep].sum()
+
+
+def known_duration(comp, warps, demo, config):
+    """Partner RMS after each fraction with T known, per named warp b: {name: [per fraction]}."""
+    rows = observed_rows(demo)
+    used = rows[decimated_rows(demo.t[rows], config.min_interval)]
+    out = {name: [] for name in warps}
+    for f in FRACTIONS:
+        sel = used[demo.t[used] <= f * demo.duration + 1e-9]
+        rest = np.flatnonzero((demo.t > f * demo.duration + 1e-9)
+                              & ~np.isnan(demo.controlled).any(axis=1))
+        for name, b in warps.items():
+            mu = comp.posterior(warp(demo.t[sel] / demo.duration, b), demo.observed[sel])[0]
+            out[name].append(rms(comp.partner(mu, warp(demo.t[rest] / demo.duration, b)),
+                                 demo.controlled[rest]))
+    return out
+
+
+def version(v, prior_sd):
+    from mixture_ip_ros.scenarios import nuisi
+    demos = nuisi.demonstrations(v, 'train') + nuisi.demonstrations(v, 'test')
+    labels = np.array([d.label for d in demos])
+    folds = stratified_folds(labels)
+    config = interactions_config()
+    rows, failed = {}, []
+
+    def add(name, values):
+        rows.setdefault(name, []).append(values)
+    for f in range(folds.max() + 1):
+        train_i, test_i = np.flatnonzero(folds != f), np.flatnonzero(folds == f)
+        train = [demos[i] for i in train_i]
+        model, _ = trained(train, config, n_jobs=1, labels=labels[train_i])
+        names = list(model.classes_)
+        comp_of = [names.index(labels[i]) for i in train_i]
+        fits = [fit_warp(Observed(model, k), d, prior_sd) for k, d in zip(comp_of, train)]
+        failed += [d.name for d, (_, good) in zip(train, fits) if not good]
+        b = np.array([x for x, _ in fits])
+        means = np.array([b[np.equal(comp_of, k)].mean(axis=0) for k in range(len(names))])
+        registered = [Demonstration(d.duration * warp(d.phase, bi), d.observed, d.controlled,
+                                    d.label, d.name) for d, bi in zip(train, b)]
+        reg_model, _ = trained(registered, config, n_jobs=1, labels=labels[train_i])
+        linear = np.zeros((len(names), N_WARP))
+        est = OnlineEstimator(model, n_alpha=config.n_alpha, min_interval=config.min_interval)
+        for i in test_i:
+            d = demos[i]
+            k = names.index(labels[i])
+            for tag, mod in (('', model), ('registered, ', reg_model)):
+                comp = Observed(mod, k, config.min_interval)
+                own, good = fit_warp(Observed(mod, k), d, prior_sd)
+                if not good:
+                    failed.append(d.name)
+                for name, r in known_duration(comp, {'linear': np.zeros(N_WARP),
+                                                     "recording's own warp": own,
+                                                     "component's mean warp": means[k]},
+                                              d, config).items():
+                    add(f'T known, {tag}{name}', r)
+            lin = online(model, linear, d, config, (None,) + ETAS + SPLITS)
+            add('online, linear', lin[None])
+            for eta in ETAS:
+                add(f'online, linear, speed weight {eta:g}', lin[eta])
+            for now, later in SPLITS:
+                add(f'online, the phase reached from speed weight {now:g}, the rest at speed '
+                    f'weight {later:g}', lin[now, later])
+            add("online, component's mean warp", online(model, means, d, config, (None,))[None])
+            add("online, registered, component's mean warp",
+                online(reg_model, means, d, config, (None,))[None])
+            add("online, the package's estimator",
+                [rms(p.controlled, d.controlled[p.rest])
+                 for p in prefix_predictions(est, d, FRACTIONS)])
+    return {'partner_rms_cm_mean_by_fraction': {
+        name: [round(100 * float(x), 1) for x in np.mean(r, axis=0)] for name, r in rows.items()},
+        'warp_fits_not_converged': failed}
 
 
 def main(argv=None):
     p = argparse.ArgumentParser()
-    p.add_argument('--supervised', action='store_true')
-    p.add_argument('--components', type=int, default=10)
-    p.add_argument('--rounds', type=int, default=3)
-    p.add_argument('--prior-sd', type=float, default=2.0)
+    p.add_argument('--versions', default='v1,v2')
+    p.add_argument('--prior-sd', type=float, default=1.0,
+                   help='prior standard deviation of the log phase rate weights b')
     args = p.parse_args(argv)
     t0 = time.perf_counter()
-    train, test = gesture_demonstrations('train'), gesture_demonstrations('test')
-    labels = np.array([d.label for d in train])
-    fit_labels = labels if args.supervised else None
-    fractions = (0.3, 0.5, 0.7, 1.0)
-    K = len(set(labels)) if args.supervised else args.components
-
-    def fit(demos):
-        return MixtureIProMP(K).fit(demos, labels=fit_labels)
-    model = fit(train)
-
-    def named(m):
-        return (list(m.classes_) if args.supervised
-                else majority_names(np.argmax(m.resp_, 1), labels, K))
-    result = {'supervised': args.supervised, 'n_components': K,
-              'linear_phase': accuracy(model, named(model), test, fractions, args.prior_sd, False)}
-    bs = [None] * len(train)
-    ll_rounds = []
-    for _ in range(args.rounds):
-        comps = np.argmax(model.resp_, axis=1)
-        total = 0.0
-        for i, d in enumerate(train):
-            bs[i], ll = best_warp(model, comps[i], d.phase, d.observed, args.prior_sd, bs[i])
-            total += ll
-        ll_rounds.append(total)
-        model = fit([registered(d, b) for d, b in zip(train, bs)])
-    result['training_loglik_by_round'] = ll_rounds
-    result['warped_phase'] = accuracy(model, named(model), test, fractions, args.prior_sd, True)
-    result['runtime_s'] = round(time.perf_counter() - t0, 1)
-    print(json.dumps(result))
+    out = {'fractions': list(FRACTIONS), 'prior_sd': args.prior_sd, 'n_warp': N_WARP}
+    for v in args.versions.split(','):
+        out[v] = version(v, args.prior_sd)
+    out['runtime_s'] = round(time.perf_counter() - t0, 1)
+    print(json.dumps(out))
 
 
 if __name__ == '__main__':

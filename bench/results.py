@@ -3,7 +3,7 @@ drift from what the code gives.
 
 Runs every `mixture-ip evaluate` scenario, the closed-loop demo for every shipped arm (and with
 every command delayed), the interactions demo, and the benches (training, the estimator's
-update, the simulation, the soak), each into out/results/<name>.json, then writes
+update, the simulation, the soak, the phase models), each into out/results/<name>.json, then writes
 docs/results.md with the date, the machine and the commit. ``--reuse`` keeps the JSON already
 in out/results (to rewrite the page after one part was rerun). About 40 minutes on 2 cores.
 
@@ -46,6 +46,7 @@ def jobs():
     out['robustness'] = ([sys.executable, str(ROOT / 'bench' / 'robustness.py'), '--out',
                           str(OUT / 'robustness')], None)
     out['cpu_kernels'] = ([sys.executable, str(ROOT / 'bench' / 'cpu_kernels.py')], None)
+    out['nonlinear_phase'] = ([sys.executable, str(ROOT / 'bench' / 'nonlinear_phase.py')], None)
     out['train'] = ([sys.executable, str(ROOT / 'bench' / 'train.py')], None)
     out['train_scaling'] = ([sys.executable, str(ROOT / 'bench' / 'train_scaling.py')], None)
     out['estimator'] = ([sys.executable, str(ROOT / 'bench' / 'estimator.py')], None)
@@ -145,6 +146,29 @@ def robustness_section(rob, kernels) -> list:
               f"curves behind them differ by {kernels['curve_max_relative_difference']:.1e} "
               'relative at most.', '']
     return L
+
+
+def phase_section(nl) -> list:
+    """The phase models against the partner (bench/nonlinear_phase.py)."""
+    if not nl:
+        return []
+    versions = [v for v in ('v1', 'v2') if v in nl]
+    L = ['## A phase that bends, and what limits the partner (`bench/nonlinear_phase.py`)', '',
+         'The supervised mixture on the interactions evaluation\'s folds; partner RMS over the '
+         'rest of the interaction after 30 / 50 / 70 %, cm (mean over the held-out '
+         'recordings). The warp (thesis eq. 34 in a monotone family: the log phase rate a sum '
+         f"of {nl['n_warp']} bumps, weights' prior sd {nl['prior_sd']:g}) is fitted to each "
+         "demonstration by MAP under its component; \"registered\": the model retrained on "
+         'the training recordings at their warped phases. Warp fits not converged: ' +
+         ', '.join(f"{v} {len(nl[v]['warp_fits_not_converged'])}" for v in versions) + '.', '',
+         '| phase model | ' + ' | '.join(f'NuiSI {v}' for v in versions) + ' |',
+         '|---|' + '---|' * len(versions)]
+    rows = nl[versions[0]]['partner_rms_cm_mean_by_fraction']
+    for name in rows:
+        L.append(f'| {name} | ' + ' | '.join(
+            ' / '.join(f'{x:.1f}' for x in nl[v]['partner_rms_cm_mean_by_fraction'][name])
+            for v in versions) + ' |')
+    return L + ['']
 
 
 def page(R: dict) -> str:
@@ -253,6 +277,7 @@ def page(R: dict) -> str:
         people = ' / '.join(f"{m['people_contact_distance_cm']:.1f}" for m in (v1, v2))
         L += [f'| {name.format(people=people + " cm")} | {f(v1)} | {f(v2)} |'
               for name, f in rows] + ['']
+    L += phase_section(R.get('nonlinear_phase'))
     L += robustness_section(R.get('robustness'), R.get('cpu_kernels'))
     demos = [(r, R.get(f'demo_{r}')) for r in ROBOTS]
     if any(d for _, d in demos):
