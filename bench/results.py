@@ -301,8 +301,9 @@ def page(R: dict) -> str:
               'NuiSI v2\'s 11 held-out recordings, iiwa)', '',
               '| model | right interaction | committed (mean) | flange to partner after '
               'commitment, RMS: loop / offline | at the end: loop / offline | at the contact, '
-              'flange / partner to person 1 | tracking RMS, max | refused | beyond limits |',
-              '|---|---|---|---|---|---|---|---|---|']
+              'flange / partner to person 1 | committed after the contact | tracking RMS, max | '
+              'refused | beyond limits |',
+              '|---|---|---|---|---|---|---|---|---|---|']
         for run_ in ints['runs']:
             if 'model' not in run_ or 'right' not in run_:
                 continue
@@ -314,6 +315,7 @@ def page(R: dict) -> str:
                      f"{run_['offline_end_cm_mean']:.1f} cm | "
                      f"{run_['flange_to_person1_at_contact_cm_mean']:.1f} / "
                      f"{run_['people_at_contact_cm_mean']:.1f} cm | "
+                     f"{run_.get('committed_after_contact', '-')}/{run_['n']} | "
                      f"{run_['tracking_rms_mrad_max']:.3f} mrad | "
                      f"{run_['refused_trajectories']} | {run_['points_beyond_limits']} |")
         L.append('')

@@ -63,6 +63,11 @@ def test_the_arm_answers_as_the_partner_did_within_its_limits(report):
         # than anywhere else (a wave's people stay half a metre apart)
         assert 0 < r['people_at_contact_cm'] < 100, r['name']
         assert np.isfinite(r['flange_to_person1_at_contact_cm']), r['name']
+        # when the arm committed against when the people's hands met (it starts from its rest
+        # there: a handshake met 1.5 s after its onset is over before the arm arrives)
+        assert np.isfinite(r['commit_before_contact_s']), r['name']
         assert r['tracking_rms_mrad'] < 0.5, r['name']
         assert r['points_beyond_limits'] == 0 and r['non_finite_commands'] == 0, r['name']
         assert r['refused_trajectories'] <= 1, r['name']    # a plan late under load, at most
+    assert report['committed_after_contact'] == sum(r['commit_before_contact_s'] < 0
+                                                    for r in report['interactions'])

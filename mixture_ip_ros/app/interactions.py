@@ -136,7 +136,8 @@ def loop_errors(record, scene, recording) -> dict:
     of the movement (the observer's 'end', else the recording's last frame): RMS; once the run
     is over against the partner's last position; at the recorded contact
     (scenarios.interactions.contact) from person 1's hand, beside the two people's own distance
-    there (cm); with the replay's offset (s)."""
+    there (cm), and how long before the contact the robot committed (s; negative: after it,
+    when the arm can only catch up); with the replay's offset (s)."""
     offset = replay_offset(record, scene, recording)
     pt, partner = interactions.partner_hand(recording, scene)
     before, _ = interactions.replay_frames(recording, scene.config)
@@ -151,7 +152,8 @@ def loop_errors(record, scene, recording) -> dict:
            'contact_cm': float(100 * np.linalg.norm(at_contact - person1)),
            'people_contact_cm': float(100 * np.linalg.norm(person2 - person1))}
     if record.commit_time is None:
-        return {**out, 'rms_cm': None}
+        return {**out, 'rms_cm': None, 'commit_before_contact_s': None}
+    out['commit_before_contact_s'] = float(t_contact - (record.commit_time - offset))
     t = np.asarray(record.t) - offset
     sel = (t >= record.commit_time - offset) & (t <= end)
     d = np.linalg.norm(np.asarray(record.flange)[sel] - _partner_at(t[sel], pt, partner), axis=1)
@@ -275,6 +277,7 @@ def run_one(loop, scene, model, bag, recording):
            'flange_to_partner_end_cm': errors['end_cm'],
            'flange_to_person1_at_contact_cm': errors['contact_cm'],
            'people_at_contact_cm': errors['people_contact_cm'],
+           'commit_before_contact_s': errors['commit_before_contact_s'],
            'tracking_rms_mrad': rms, 'tracking_max_mrad': worst,
            'refused_trajectories': loop.sim.rejection_count - refused_before,
            'points_beyond_limits': beyond_limits(rec, scene.kin),
@@ -297,7 +300,8 @@ def _line(row) -> str:
             f'{num(row["flange_to_partner_end_cm"], "5.1f")} cm (offline '
             f'{num(row.get("offline_end_cm"), "5.1f")}); at the contact '
             f'{num(row["flange_to_person1_at_contact_cm"], "5.1f")} cm from person 1 (the '
-            f'people {num(row["people_at_contact_cm"], "4.1f")}); tracking '
+            f'people {num(row["people_at_contact_cm"], "4.1f")}; committed '
+            f'{num(row["commit_before_contact_s"], "+.2f")} s before it); tracking '
             f'{num(row["tracking_rms_mrad"], ".3f")} mrad; refused '
             f'{row["refused_trajectories"]}, beyond limits {row["points_beyond_limits"]}')
 
@@ -315,6 +319,8 @@ def summary(rows, info) -> dict:
             'offline_end_cm_mean': mean('offline_end_cm'),
             'flange_to_person1_at_contact_cm_mean': mean('flange_to_person1_at_contact_cm'),
             'people_at_contact_cm_mean': mean('people_at_contact_cm'),
+            'committed_after_contact': int(sum((r['commit_before_contact_s'] or 0.0) < 0.0
+                                               for r in rows)),
             'tracking_rms_mrad_max': max((r['tracking_rms_mrad'] for r in rows
                                           if r['tracking_rms_mrad'] is not None), default=None),
             'refused_trajectories': int(sum(r['refused_trajectories'] for r in rows)),
