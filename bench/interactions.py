@@ -23,8 +23,10 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 from mixture_ip_ros.app import interactions as app  # noqa: E402
 
 SUMMARY = ('right', 'n', 'commit_fraction_mean', 'flange_to_partner_rms_cm_mean',
+           'flange_to_partner_from_onset_rms_cm_mean',
            'offline_rms_cm_mean', 'flange_to_partner_end_cm_mean', 'offline_end_cm_mean',
            'flange_to_person1_at_contact_cm_mean', 'people_at_contact_cm_mean',
+           'flange_to_person1_at_touch_cm_mean', 'people_at_touch_cm_mean',
            'committed_after_contact',
            'tracking_rms_mrad_max', 'refused_trajectories', 'points_beyond_limits',
            'non_finite_commands', 'n_components')

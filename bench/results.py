@@ -83,6 +83,10 @@ def machine() -> str:
     return f'{os.cpu_count()} cores ({model}), load average {load} when the page was written'
 
 
+def fmt(x, spec):
+    return '-' if x is None else format(x, spec)
+
+
 def pct(x):
     return '-' if x is None else f'{100 * x:.0f} %'
 
@@ -300,10 +304,11 @@ def page(R: dict) -> str:
         L += ['## The robot takes a person\'s part (`mixture-ip demo --scenario interactions`, '
               'NuiSI v2\'s 11 held-out recordings, iiwa)', '',
               '| model | right interaction | committed (mean) | flange to partner after '
-              'commitment, RMS: loop / offline | at the end: loop / offline | at the contact, '
-              'flange / partner to person 1 | committed after the contact | tracking RMS, max | '
+              'commitment, RMS: loop / offline | from the onset | at the end: loop / offline | '
+              'at the contact, flange / partner to person 1: all; handshakes and fist bumps | '
+              'committed after the contact | tracking RMS, max | '
               'refused | beyond limits |',
-              '|---|---|---|---|---|---|---|---|---|---|']
+              '|---|---|---|---|---|---|---|---|---|---|---|']
         for run_ in ints['runs']:
             if 'model' not in run_ or 'right' not in run_:
                 continue
@@ -311,10 +316,13 @@ def page(R: dict) -> str:
                      f"{run_['right']}/{run_['n']} | {pct(run_['commit_fraction_mean'])} | "
                      f"{run_['flange_to_partner_rms_cm_mean']:.1f} / "
                      f"{run_['offline_rms_cm_mean']:.1f} cm | "
+                     f"{fmt(run_.get('flange_to_partner_from_onset_rms_cm_mean'), '.1f')} cm | "
                      f"{run_['flange_to_partner_end_cm_mean']:.1f} / "
                      f"{run_['offline_end_cm_mean']:.1f} cm | "
                      f"{run_['flange_to_person1_at_contact_cm_mean']:.1f} / "
-                     f"{run_['people_at_contact_cm_mean']:.1f} cm | "
+                     f"{run_['people_at_contact_cm_mean']:.1f} cm; "
+                     f"{fmt(run_.get('flange_to_person1_at_touch_cm_mean'), '.1f')} / "
+                     f"{fmt(run_.get('people_at_touch_cm_mean'), '.1f')} cm | "
                      f"{run_.get('committed_after_contact', '-')}/{run_['n']} | "
                      f"{run_['tracking_rms_mrad_max']:.3f} mrad | "
                      f"{run_['refused_trajectories']} | {run_['points_beyond_limits']} |")

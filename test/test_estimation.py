@@ -1103,3 +1103,93 @@ def test_plan_phases_are_numpys_linspace():
         stop = rng.choice([1.0, start, rng.uniform(-3, 3)])
         num = int(rng.integers(2, 60))
         assert np.array_equal(linspace(start, stop, num), np.linspace(start, stop, num))
+
+
+# -- hedged plans before the commit -------------------------------------------------------------
+
+def test_the_predictive_path_weights_every_likely_components_path_by_its_probability(noisy):
+    """predictive_controlled: sum_k p(k | D) of each component's expected path (the dense
+    oracle: the batch formulas of _expected_path_oracle per component), over the components
+    holding the posterior, renormalised; the hedged plan runs to the latest of their ends."""
+    model, _, held = noisy
+    demo = held[1]
+    est = OnlineEstimator(model)
+    until = demo.t[4]
+    _feed(est, demo, until=until)
+    components, probs = est.likely_components()
+    assert len(components) > 1 and np.isclose(probs.sum(), 1.0)    # still uncertain
+    p = est.component_posterior()
+    assert np.allclose(probs, p[components] / p[components].sum())
+    plan = build_plan(est, float(until), n_points=25, lookahead=0.1, hedged=True)
+    paths = [_expected_path_oracle(model, demo, until, k, plan.times) for k in components]
+    assert plan.times[-1] == pytest.approx(max(end for _, end in paths), rel=1e-12)
+    oracle = sum(q * path for q, (path, _) in zip(probs, paths))
+    assert np.allclose(plan.positions, oracle, atol=1e-10)
+    assert check_plan(plan) is None and plan.component == est.map_hypothesis()[0]
+    with pytest.raises(ValueError, match='hedged'):
+        build_plan(est, float(until), alpha=est.alphas[3], hedged=True)
+
+
+def test_a_hedging_robot_moves_before_it_commits_and_commits_as_without(noisy):
+    """With hedge, plans go out from min_observations on, before p(k* | D) reaches the
+    threshold; the commit (phase, observations, component) is the one without hedge, and
+    every plan after it is the same plan."""
+    model, meta, held = noisy
+    demo = held[1]
+    runs = {}
+    for hedge in (False, True):
+        planner, _ = _planner(model, meta, confidence_threshold=0.98, min_observations=2,
+                              hedge=hedge)
+        planner.onset(0)
+        steps = []
+        for t, y in zip(demo.t, demo.observed):
+            planner.observe(_ns(t), y)
+            steps.append(planner.replan())
+        runs[hedge] = planner, steps
+    (plain, plain_steps), (hedging, hedge_steps) = runs[False], runs[True]
+    for name in ('commit_phase', 'commit_observations', 'commit_component', 'commit_elapsed'):
+        assert getattr(hedging.current, name) == getattr(plain.current, name)
+    commit = next(i for i, s in enumerate(plain_steps) if s is not None and s.committed_now)
+    early = [s for s in hedge_steps[:commit] if s is not None and s.send]
+    assert hedging.current.hedged_plans == len(early) > 0
+    assert not any(s.send for s in plain_steps[:commit] if s is not None)
+    assert hedge_steps[commit].committed_now and hedge_steps[commit].switched_from is None
+    assert hedging.current.switches == plain.current.switches
+    for a, b in zip(plain_steps[commit:], hedge_steps[commit:]):
+        assert (a is None) == (b is None)
+        if a is not None:
+            assert a.send == b.send and np.array_equal(a.plan.positions, b.plan.positions)
+
+
+def test_a_hedging_robot_never_moves_for_a_movement_the_model_does_not_know(trained, noisy):
+    """The novelty gate holds hedged plans too: a return to rest sends nothing; a movement
+    that stops being explained once hedged plans went out (the noisy sensor's model stays
+    below the threshold) makes the robot hold."""
+    model, meta, held = trained
+    for demo in held:
+        planner = OnlinePlanner(OnlineEstimator(model), PlannerSettings(hedge=True),
+                                novelty=model.novelty_)
+        planner.onset(0)
+        steps = [planner.replan() for t, y in zip(demo.t, demo.observed[::-1])
+                 if planner.observe(_ns(t), y) is not None]
+        assert planner.counts.plans_sent == 0 and not any(s.send for s in steps if s)
+    # a second reach from where the first ended, without a rest
+    # (test_a_committed_robot_holds_when_the_movement_stops_being_explained)
+    model, meta, held = noisy
+    first, second = held[1], held[0]
+    t = np.concatenate([first.t, first.t[-1] + 0.01 + second.t])
+    Y = np.vstack([first.observed, second.observed - second.observed[0] + first.observed[-1]])
+    planner = OnlinePlanner(OnlineEstimator(model),
+                            PlannerSettings(hedge=True, confidence_threshold=1.0),
+                            novelty=model.novelty_)
+    planner.onset(0)
+    holds = []
+    for ti, y in zip(t, Y):
+        planner.observe(_ns(ti), y)
+        step = planner.replan()
+        if step is not None and step.hold:
+            holds.append(step)
+    assert planner.current.hedged_plans > 0 and planner.current.commit_phase is None
+    assert len(holds) == 1 and not holds[0].send and planner.counts.holds == 1
+    assert planner.current.end_reason == 'unexplained' and planner.state == 'done'
+    assert planner.current.end_elapsed > first.duration   # after the first reach was done

@@ -55,7 +55,8 @@ def test_the_shipped_settings_load():
     (lambda s: s['observer'].update(end_wait=1.0), "observer: unknown settings ['end_wait']"),
     (lambda s: s['observer'].update(end_hold=-1.0), 'observer: MotionSegmenter: end_hold'),
     (lambda s: s.update(rest_after=0.5), 'rest_after (0.5 s) must be at least observer.end_hold'),
-    (lambda s: s['estimator'].update(n_alpha=20), 'estimator: only lookahead is set here'),
+    (lambda s: s['estimator'].update(n_alpha=20), 'estimator: only lookahead and hedge are set'),
+    (lambda s: s['estimator'].update(hedge='yes'), 'estimator.hedge must be true or false'),
     (lambda s: s['estimator'].update(lookahead=0), 'estimator.lookahead must be a finite number'),
 ])
 def test_bad_settings_are_refused_in_one_line_naming_the_file_and_the_field(tmp_path, change,

@@ -71,3 +71,5 @@ def test_the_arm_answers_as_the_partner_did_within_its_limits(report):
         assert r['refused_trajectories'] <= 1, r['name']    # a plan late under load, at most
     assert report['committed_after_contact'] == sum(r['commit_before_contact_s'] < 0
                                                     for r in report['interactions'])
+    # the scenario hedges (config/interactions.yaml): the arm set off before it committed
+    assert sum(r['hedged_plans'] for r in report['interactions']) > 0

@@ -133,7 +133,8 @@ def _last(path) -> np.ndarray:
 
 def loop_errors(record, scene, recording) -> dict:
     """The flange's distance from where the partner's hand was, from the commitment to the end
-    of the movement (the observer's 'end', else the recording's last frame): RMS; once the run
+    of the movement (the observer's 'end', else the recording's last frame), and from the
+    onset (the robot may move before it commits: PlannerSettings.hedge): RMS; once the run
     is over against the partner's last position; at the recorded contact
     (scenarios.interactions.contact) from person 1's hand, beside the two people's own distance
     there (cm), and how long before the contact the robot committed (s; negative: after it,
@@ -151,13 +152,14 @@ def loop_errors(record, scene, recording) -> dict:
            'end_cm': float(100 * np.linalg.norm(record.flange[-1] - _last(partner))),
            'contact_cm': float(100 * np.linalg.norm(at_contact - person1)),
            'people_contact_cm': float(100 * np.linalg.norm(person2 - person1))}
+    t = np.asarray(record.t) - offset
+    d = np.linalg.norm(flange - _partner_at(t, pt, partner), axis=1)
+    out['onset_rms_cm'] = (None if record.onset_time is None else
+                           _rms_cm(d[(t >= record.onset_time - offset) & (t <= end)]))
     if record.commit_time is None:
         return {**out, 'rms_cm': None, 'commit_before_contact_s': None}
     out['commit_before_contact_s'] = float(t_contact - (record.commit_time - offset))
-    t = np.asarray(record.t) - offset
-    sel = (t >= record.commit_time - offset) & (t <= end)
-    d = np.linalg.norm(np.asarray(record.flange)[sel] - _partner_at(t[sel], pt, partner), axis=1)
-    return {**out, 'rms_cm': _rms_cm(d)}
+    return {**out, 'rms_cm': _rms_cm(d[(t >= record.commit_time - offset) & (t <= end)])}
 
 
 def offline_errors(model, scene, recording, bag, fraction: float) -> dict:
@@ -274,10 +276,12 @@ def run_one(loop, scene, model, bag, recording):
            'commit_s': (None if rec.commit_time is None or rec.onset_time is None
                         else rec.commit_time - rec.onset_time),
            'flange_to_partner_rms_cm': errors['rms_cm'],
+           'flange_to_partner_from_onset_rms_cm': errors['onset_rms_cm'],
            'flange_to_partner_end_cm': errors['end_cm'],
            'flange_to_person1_at_contact_cm': errors['contact_cm'],
            'people_at_contact_cm': errors['people_contact_cm'],
            'commit_before_contact_s': errors['commit_before_contact_s'],
+           'hedged_plans': (rec.extra['interaction'] or {}).get('hedged_plans', 0),
            'tracking_rms_mrad': rms, 'tracking_max_mrad': worst,
            'refused_trajectories': loop.sim.rejection_count - refused_before,
            'points_beyond_limits': beyond_limits(rec, scene.kin),
@@ -307,18 +311,24 @@ def _line(row) -> str:
 
 
 def summary(rows, info) -> dict:
-    def mean(key):
-        v = [r[key] for r in rows if r.get(key) is not None]
+    def mean(key, among=rows):
+        v = [r[key] for r in among if r.get(key) is not None]
         return float(np.mean(v)) if v else None
+    # where the hands meet (a wave's closest approach is no contact: the people stay apart)
+    touching = [r for r in rows if r['true_pattern'] in interactions.CONTACT]
     right = lambda r: r['true_pattern'] == r['chosen_pattern']    # noqa: E731
     return {'interactions': rows, 'right': int(sum(right(r) for r in rows)), 'n': len(rows),
             'commit_fraction_mean': mean('commit_fraction'),
             'flange_to_partner_rms_cm_mean': mean('flange_to_partner_rms_cm'),
+            'flange_to_partner_from_onset_rms_cm_mean': mean('flange_to_partner_from_onset_rms_cm'),
             'offline_rms_cm_mean': mean('offline_rms_cm'),
             'flange_to_partner_end_cm_mean': mean('flange_to_partner_end_cm'),
             'offline_end_cm_mean': mean('offline_end_cm'),
             'flange_to_person1_at_contact_cm_mean': mean('flange_to_person1_at_contact_cm'),
             'people_at_contact_cm_mean': mean('people_at_contact_cm'),
+            'flange_to_person1_at_touch_cm_mean': mean('flange_to_person1_at_contact_cm',
+                                                       touching),
+            'people_at_touch_cm_mean': mean('people_at_contact_cm', touching),
             'committed_after_contact': int(sum((r['commit_before_contact_s'] or 0.0) < 0.0
                                                for r in rows)),
             'tracking_rms_mrad_max': max((r['tracking_rms_mrad'] for r in rows

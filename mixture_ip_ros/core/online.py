@@ -603,6 +603,36 @@ class OnlineEstimator:
                                             basis.centers, basis.width, derivatives)
         return (k, pos, vel, acc) if derivatives else (k, pos, None, None)
 
+    def likely_components(self):
+        """The components that hold p(k | D): (indices, probabilities renormalised over them).
+        One less probable than SPEED_SUPPORT times the most probable is left out, as a speed is
+        in :meth:`speed_hypotheses`."""
+        p = self.component_posterior()
+        keep = np.flatnonzero(p >= SPEED_SUPPORT * p.max())
+        return keep, p[keep] / p[keep].sum()
+
+    def latest_end(self, components) -> float:
+        """The end (s since onset) of the slowest phase speed holding any of ``components``'
+        tempered posteriors: when every hypothesis of theirs has ended."""
+        return max(1.0 / float(self.alphas[self.speed_hypotheses(k)[0]].min())
+                   for k in components)
+
+    def predictive_controlled(self, times, derivatives: bool = True):
+        """The controlled agent's expected path at ``times`` (s since onset) with the component
+        marginalised too: sum_k p(k | D) :meth:`expected_controlled` (times, k), over
+        :meth:`likely_components`. Before the pattern is known this is the best prediction
+        under squared error (each component's path commits to one interaction); it becomes
+        k*'s as p(k* | D) goes to 1. Returns (positions, velocities, accelerations), each
+        (len(times), Q); velocities and accelerations None without ``derivatives``."""
+        components, probs = self.likely_components()
+        out = None
+        for k, p in zip(components, probs):
+            path = self.expected_controlled(times, component=k, derivatives=derivatives)[1:]
+            terms = [None if x is None else p * x for x in path]
+            out = terms if out is None else [None if x is None else x + y
+                                              for x, y in zip(out, terms)]
+        return tuple(out)
+
     def predict_at_rest(self, y_final, component=None):
         """The controlled agent's final posture once the movement has ended: eq. 13 with D the
         final position of the observed agent at z = 1 (phase known), as in the thesis's

@@ -20,6 +20,15 @@ with at least ``min_observations`` observations used and, given calibrated novel
 (core.novelty), the model explains the movement; afterwards every replan is sent, also when k*
 changes (the controller blends from its current state into the new plan), until the movement
 stops being explained: then the robot holds and the interaction ends ('unexplained').
+
+Hedging (``hedge``): when only the confidence is missing, the plan with the component
+marginalised too is sent (every likely interaction's expected path weighted by p(k | D), the
+best prediction under squared error while the interaction is uncertain), so the robot is under
+way when it commits. Where the interaction comes to its point early (a handshake's hands meet
+1.5 s after its onset in NuiSI v2) the arm could not arrive in time from rest at commitment.
+Hedged plans are not a commit: they stop with a hold like committed ones when the movement is
+unexplained, and at the end of an interaction never committed no final plan is sent (the arm
+stays on the last one's final posture).
 """
 
 from collections import deque
@@ -53,7 +62,10 @@ class PlannerSettings:
     ``backlog_slice``: held samples conditioned on per call after an onset;
     ``max_clock_offset`` (s, 0 = no check): a plan resting on an observation stamped further
     than this from the caller's clock is not sent (the observations are on another clock, and
-    the controller would wait for a start years away)."""
+    the controller would wait for a start years away). ``hedge``: before the commit, once the
+    commit waits on confidence alone, send the plan with the component marginalised too
+    (estimation.plans.build_plan's ``hedged``), so that the robot is under way when the
+    interaction is recognised."""
 
     confidence_threshold: float = 0.9
     min_observations: int = 3
@@ -66,6 +78,7 @@ class PlannerSettings:
     replan_on_observation: bool = True
     max_records: int = 1000
     max_clock_offset: float = 0.0
+    hedge: bool = False
 
     def __post_init__(self):
         def need(ok, what):
@@ -92,8 +105,9 @@ class Step:
     """What one replan produced: always the posterior summary and the plan (its hypothesis is
     the one of the predicted path); ``send`` says whether the joint trajectory goes out;
     ``problem`` why the plan may not be published; ``unexplained`` why the movement is none the
-    model knows (no commit; once committed, ``hold``: the robot must stop where it is). ``trigger_ns``: the stamp of the latest
-    evidence the plan rests on (the observation or the 'end' event that brought it)."""
+    model knows (no commit; once the robot moves, ``hold``: it must stop where it is).
+    ``trigger_ns``: the stamp of the latest evidence the plan rests on (the observation or the
+    'end' event that brought it)."""
 
     summary: PosteriorSummary
     plan: Optional[Plan]
@@ -142,6 +156,7 @@ class OnlinePlanner:
         self._trigger_ns = None   # its stamp
         self._dirty = False       # something new since the last replan
         self._sent_component = None
+        self._hedging = False     # hedged plans sent in this interaction
         self._final_time = None   # time of the last final (at rest) plan's point
 
     # -- settings ---------------------------------------------------------------------
@@ -214,6 +229,7 @@ class OnlinePlanner:
         self._trigger_ns = self._onset_ns
         self._dirty = True
         self._sent_component = None
+        self._hedging = False
         self._final_time = None
         self.state = 'observing'
         excess = len(self.interactions) + 1 - self._settings.max_records
@@ -366,44 +382,53 @@ class OnlinePlanner:
             clock_now = (int(now_ns) - self._onset_ns) * 1e-9
             if t_now < clock_now <= t_now + MAX_LAG:
                 t_plan = clock_now
+        unexplained = None if self._novelty is None else self._novelty.unexplained()
+        if unexplained is not None:
+            rec.unexplained = unexplained
+        # Before the commit: the robot moves on the hedged plan once only confidence is missing.
+        waiting = self.state == 'observing' and (
+            self._backlog or unexplained is not None
+            or not should_commit(summary.probabilities, est.n_observations,
+                                 s.confidence_threshold, s.min_observations))
+        hedged = (waiting and s.hedge and not ended and not self._backlog
+                  and unexplained is None and est.n_observations >= s.min_observations)
         plan = build_plan(est, t_plan, n_points=s.n_points, lookahead=s.lookahead,
                           settle_time=s.settle_time, component=k,
                           alpha=summary.alpha if ended else None,
                           final_time=self._final_time, robot_q=self.robot_q,
                           catch_up_velocity=self.catch_up_velocity,
-                          final_position=self._y_latest if final else None)
+                          final_position=self._y_latest if final and not hedged else None,
+                          hedged=hedged)
         trigger = self._trigger_ns
         sendable, problem = self._checked(plan, t_plan, self._fresh_ns if final else trigger,
                                           now_ns)
         if problem is not None:
             return Step(summary, plan, send=False, trigger_ns=trigger, problem=problem)
         plan = sendable
-        unexplained = None if self._novelty is None else self._novelty.unexplained()
-        if unexplained is not None:
-            rec.unexplained = unexplained
-        committed_now = False
-        if self.state == 'observing':
-            if (self._backlog or unexplained is not None
-                    or not should_commit(summary.probabilities, est.n_observations,
-                                         s.confidence_threshold, s.min_observations)):
-                return Step(summary, plan, send=False, trigger_ns=trigger,
-                            unexplained=unexplained)
-            committed_now = True
-            self.state = rec.state = 'committed'
-            rec.commit_phase, rec.commit_elapsed = summary.phase, t_now
-            rec.commit_component, rec.commit_observations = k, est.n_observations
-        elif unexplained is not None:
-            # Committed, and what the person does now is no movement the model knows: the robot
+        if unexplained is not None and (self.state == 'committed' or self._hedging):
+            # The robot moves, and what the person does now is no movement the model knows: it
             # stops where it is; this interaction gets no more plans.
             self.counts.holds += 1
             self._close('unexplained', t_now)
             return Step(summary, plan, send=False, trigger_ns=trigger, hold=True,
                         unexplained=unexplained)
+        if waiting and not hedged:
+            return Step(summary, plan, send=False, trigger_ns=trigger, unexplained=unexplained)
+        committed_now = False
+        if not waiting and self.state == 'observing':
+            committed_now = True
+            self.state = rec.state = 'committed'
+            rec.commit_phase, rec.commit_elapsed = summary.phase, t_now
+            rec.commit_component, rec.commit_observations = k, est.n_observations
+        if hedged:      # no component's plan: a switch is one committed plan to the next
+            self._hedging = True
+            rec.hedged_plans += 1
         switched_from = None
         if self._sent_component is not None and k != self._sent_component:
             switched_from = self._sent_component
             rec.switches.append(Switch(t_now, summary.phase, switched_from, k))
-        self._sent_component = k
+        if not hedged:
+            self._sent_component = k
         if plan.final:
             self._final_time = float(plan.times[-1])
         self.counts.plans_sent += 1

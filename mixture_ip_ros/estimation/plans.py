@@ -3,11 +3,12 @@ posterior summary that goes with every replan.
 
 Time is seconds since the interaction's onset on the observations' clock (their stamps).
 
-Plan (:func:`build_plan`): under the MAP component k*, the robot's expected trajectory with the
-phase speed marginalised (OnlineEstimator.expected_controlled: each speed hypothesis's
-conditioned trajectory, eq. 13, weighted by its tempered posterior), at ``n_points`` times
-evenly spaced from ``t_now + lookahead`` to the end of the slowest speed hypothesis that holds
-the posterior, ``1 / min alpha_m``; or, for a given phase speed alpha (the end known), phases
+Plan (:func:`build_plan`): under the MAP component k* (or, hedged, every likely component
+weighted by its probability), the robot's expected trajectory with the phase speed
+marginalised (OnlineEstimator.expected_controlled: each speed hypothesis's conditioned
+trajectory, eq. 13, weighted by its tempered posterior), at ``n_points`` times evenly spaced
+from ``t_now + lookahead`` to the end of the slowest speed hypothesis that holds the
+posterior, ``1 / min alpha_m``; or, for a given phase speed alpha (the end known), phases
 evenly spaced from ``alpha (t_now + lookahead)`` to 1 at ``times = z / alpha``. The first point
 lies ``lookahead`` ahead of the present so the controller gets a reachable target, and the last
 point's velocity and acceleration are zero (the human holds still past z = 1, and
@@ -105,7 +106,8 @@ class Plan:
 def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float = 0.1,
                settle_time: float = 0.5, component: Optional[int] = None,
                alpha: Optional[float] = None, final_time: Optional[float] = None,
-               robot_q=None, catch_up_velocity=None, final_position=None) -> Plan:
+               robot_q=None, catch_up_velocity=None, final_position=None,
+               hedged: bool = False) -> Plan:
     """The plan from ``t_now`` (s since onset) on, for ``component`` (default: the MAP one),
     the phase speed marginalised, or at phase speed ``alpha`` if given.
 
@@ -118,17 +120,25 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
     ``final_position``: the human's movement has ended here (the observer's 'end'): the plan is
     the single final posture conditioned on this final position at z = 1
     (``OnlineEstimator.predict_at_rest``).
+    ``hedged``: the component marginalised too (OnlineEstimator.predictive_controlled: every
+    likely component's expected path weighted by p(k | D)), up to the end of the slowest
+    speed of any of them; ``component`` is then only the one the plan is recorded under. A
+    plan before the robot is confident of the interaction (PlannerSettings.hedge).
     """
     if n_points < 2:
         raise ValueError(f'n_points must be >= 2, got {n_points}')
     if not np.isfinite(t_now) or t_now < 0:
         raise ValueError(f't_now must be finite and >= 0, got {t_now}')
+    if hedged and (alpha is not None or final_position is not None):
+        raise ValueError('a hedged plan marginalises the phase speed and the component: no '
+                         'alpha or final position')
     if component is None:
         component = estimator.map_hypothesis()[0]
     marginal = alpha is None
     if marginal:
         speeds, p = estimator.speed_hypotheses(component)
-        t_end = 1.0 / float(estimator.alphas[speeds].min())
+        t_end = (estimator.latest_end(estimator.likely_components()[0]) if hedged
+                 else 1.0 / float(estimator.alphas[speeds].min()))
         a = float(estimator.alphas[speeds[int(np.argmax(p))]])
     else:
         a = float(alpha)
@@ -145,7 +155,11 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
     else:
         phases = linspace(a * (t_now + lookahead), 1.0, n_points)
         times = phases / a
-    if marginal:
+    if hedged:
+        k = component
+        pos, vel, acc = estimator.predictive_controlled(np.maximum(times, t_end) if final
+                                                        else times)
+    elif marginal:
         # past every hypothesis's end (a final plan) each one holds its final posture
         k, pos, vel, acc = estimator.expected_controlled(
             np.maximum(times, t_end) if final else times, component=component)

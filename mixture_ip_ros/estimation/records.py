@@ -36,11 +36,12 @@ class Interaction:
     Absolute times (``*_time``) are seconds on the observations' clock, ``*_elapsed`` seconds
     since the onset. ``component``, ``label``, ``confidence``, ``alpha`` and ``phase`` are those
     of the latest replan; ``final_*`` are set when the interaction closes. ``commit_phase`` is
-    the phase at the first plan sent, i.e. the fraction of the human movement seen (None if the
-    robot never moved). ``end_reason`` is 'end' (the observer's event), 'new_onset' (another
-    interaction started first), 'deactivated' (the node stopped) or 'unexplained' (the movement
-    stopped being one the model knows after the robot was committed: it holds); None while it
-    runs.
+    the phase at the commit, the first plan sent on a confident component, i.e. the fraction of
+    the human movement seen (None if the robot never committed); ``hedged_plans`` counts the
+    plans sent before it (PlannerSettings.hedge). ``end_reason`` is 'end' (the observer's
+    event), 'new_onset' (another interaction started first), 'deactivated' (the node stopped)
+    or 'unexplained' (the movement stopped being one the model knows after the robot started
+    moving: it holds); None while it runs.
     """
 
     onset_stamp_ns: int
@@ -61,6 +62,7 @@ class Interaction:
     n_skipped: int = 0
     n_rejected: int = 0
     plans: int = 0
+    hedged_plans: int = 0
     switches: list = field(default_factory=list)
     gaps: int = 0
     end_reason: Optional[str] = None

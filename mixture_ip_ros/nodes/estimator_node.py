@@ -12,7 +12,8 @@ Publishes   trajectory_topic   trajectory_msgs/JointTrajectory, reliable: header
                 posterior, positions, velocities, accelerations of the expected trajectory with
                 the speed marginalised (estimation.plans); header.stamp + time_from_start =
                 onset + the time of each point. Sent once
-                p(k* | D) >= confidence_threshold with >= min_observations used, then at
+                p(k* | D) >= confidence_threshold with >= min_observations used (with hedge,
+                before that the plan with the component marginalised too), then at
                 replan_rate_hz while new observations arrive, and a last time on 'end'.
                 Deactivating sends an empty trajectory: the controller stops and holds.
             path_topic         nav_msgs/Path: the whole predicted wrist movement under the
@@ -105,6 +106,11 @@ class EstimatorParameters:
                                         rule='> 0')
     min_observations: int = param(3, 'observations used before the robot moves', low=1,
                                   high=100_000, dynamic=True)
+    hedge: bool = param(False, 'before p(k* | D) reaches confidence_threshold, once the other '
+                               'conditions of the commit hold, send the plan with the component '
+                               'marginalised too (every likely interaction weighted by its '
+                               'probability): the robot is under way when it commits',
+                        dynamic=True)
     replan_rate_hz: float = param(10.0, 'replans per second while observations arrive (a '
                                         'timer covers pauses)', low=0.01, high=1000.0,
                                   dynamic=True)
@@ -289,7 +295,7 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
         get = (lambda n: p.get(n)) if partial else (lambda n: getattr(p, n))
         names = ('confidence_threshold', 'min_observations', 'n_points', 'lookahead',
                  'settle_time', 'hold_window', 'backlog_slice', 'replan_on_observation',
-                 'max_clock_offset')
+                 'max_clock_offset', 'hedge')
         values = {n: get(n) for n in names if get(n) is not None}
         if get('replan_rate_hz') is not None:
             values['replan_period'] = 1.0 / get('replan_rate_hz')

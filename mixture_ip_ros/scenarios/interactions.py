@@ -132,10 +132,13 @@ def load_config(path=None) -> InteractionsConfig:
     except (TypeError, ValueError) as exc:
         fail(f'observer: {exc}')
     estimator = data.get('estimator') or {}
-    if not isinstance(estimator, dict) or set(estimator) - {'lookahead'}:
-        fail(f'estimator: only lookahead is set here, got {estimator!r}')
+    if not isinstance(estimator, dict) or set(estimator) - {'lookahead', 'hedge'}:
+        fail(f'estimator: only lookahead and hedge are set here, got {estimator!r}')
+    if 'hedge' in estimator and not isinstance(estimator['hedge'], bool):
+        fail(f"estimator.hedge must be true or false, got {estimator['hedge']!r}")
     if 'lookahead' in estimator:
-        estimator = {'lookahead': number(estimator['lookahead'], 'estimator.lookahead',
+        estimator = {**estimator,
+                     'lookahead': number(estimator['lookahead'], 'estimator.lookahead',
                                          ('in (0, 10]', lambda v: 0 < v <= 10))}
     if values['rest_after'] < observer.get('end_hold', _default_end_hold()):
         fail(f'rest_after ({values["rest_after"]} s) must be at least observer.end_hold: the '
