@@ -24,8 +24,9 @@ stops being explained: then the robot holds and the interaction ends ('unexplain
 Hedging (``hedge``): when only the confidence is missing, the plan with the component
 marginalised too is sent (every likely interaction's expected path weighted by p(k | D), the
 best prediction under squared error while the interaction is uncertain), so the robot is under
-way when it commits. Where the interaction comes to its point early (a handshake's hands meet
-1.5 s after its onset in NuiSI v2) the arm could not arrive in time from rest at commitment.
+way when it commits. Where the interaction comes to its point early (a handshake's hands can
+meet 1.5 s after its onset in NuiSI v2) the arm could not arrive in time from rest at
+commitment.
 Hedged plans are not a commit: they stop with a hold like committed ones when the movement is
 unexplained, and at the end of an interaction never committed no final plan is sent (the arm
 stays on the last one's final posture).
