@@ -1126,6 +1126,8 @@ def test_the_predictive_path_weights_every_likely_components_path_by_its_probabi
     oracle = sum(q * path for q, (path, _) in zip(probs, paths))
     assert np.allclose(plan.positions, oracle, atol=1e-10)
     assert check_plan(plan) is None and plan.component == est.map_hypothesis()[0]
+    positions, none, nothing = est.predictive_controlled(plan.times, derivatives=False)
+    assert np.array_equal(positions, plan.positions) and none is nothing is None
     with pytest.raises(ValueError, match='hedged'):
         build_plan(est, float(until), alpha=est.alphas[3], hedged=True)
 

@@ -625,13 +625,11 @@ class OnlineEstimator:
         k*'s as p(k* | D) goes to 1. Returns (positions, velocities, accelerations), each
         (len(times), Q); velocities and accelerations None without ``derivatives``."""
         components, probs = self.likely_components()
-        out = None
-        for k, p in zip(components, probs):
-            path = self.expected_controlled(times, component=k, derivatives=derivatives)[1:]
-            terms = [None if x is None else p * x for x in path]
-            out = terms if out is None else [None if x is None else x + y
-                                              for x, y in zip(out, terms)]
-        return tuple(out)
+        paths = [self.expected_controlled(times, component=k, derivatives=derivatives)[1:]
+                 for k in components]
+        return tuple(None if paths[0][i] is None else sum(p * path[i] for p, path in
+                                                          zip(probs, paths))
+                     for i in range(3))
 
     def predict_at_rest(self, y_final, component=None):
         """The controlled agent's final posture once the movement has ended: eq. 13 with D the
