@@ -270,3 +270,17 @@ def test_unavailable_rendering_raises_runtime_error(tmp_path):
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == 'raised'
     assert not any(tmp_path.iterdir())          # nothing half-written
+
+
+def test_the_band_says_whether_the_robot_waits_or_hedges_before_it_commits(record):
+    """Between the onset and the commit the band tells a robot at rest from one on hedged
+    plans (the record's interaction counts them: PlannerSettings.hedge)."""
+    import copy
+    from mixture_ip_ros.viz.overlays import _status
+    from mixture_ip_ros.viz.replay import Replay
+    before = 0.5 * (record.onset_time + record.commit_time)
+    assert _status(Replay(record), before) == ('observing, robot waits', False)
+    hedged = copy.copy(record)
+    hedged.extra = {**record.extra, 'interaction': {'hedged_plans': 3}}
+    assert _status(Replay(hedged), before) == ('observing, robot hedges', False)
+    assert _status(Replay(hedged), record.commit_time)[1]

@@ -51,7 +51,8 @@ def _status(replay: Replay, time: float) -> tuple[str, bool]:
         return 'waiting for the person to move', False
     if rec.end_time is not None and time >= rec.end_time:
         return 'movement over, no commitment', False
-    return 'observing, robot waits', False
+    hedging = ((rec.extra or {}).get('interaction') or {}).get('hedged_plans', 0) > 0
+    return ('observing, robot hedges' if hedging else 'observing, robot waits'), False
 
 
 _WHITE, _GREY, _YELLOW, _BAND = (255, 255, 255), (170, 170, 170), (255, 220, 60), (28, 30, 36)
