@@ -44,8 +44,8 @@ from mixture_ip_ros.app.evaluation.common import trained  # noqa: E402
 from mixture_ip_ros.app.evaluation.interactions import (interactions_config,  # noqa: E402
                                                         stratified_folds)
 from mixture_ip_ros.core.demonstration import Demonstration  # noqa: E402
-from mixture_ip_ros.core.online import (SPEED_SUPPORT, OnlineEstimator,  # noqa: E402
-                                        decimated_rows, observed_rows, prefix_predictions)
+from mixture_ip_ros.core.online import (OnlineEstimator, decimated_rows,  # noqa: E402
+                                        observed_rows, prefix_predictions, supported)
 from mixture_ip_ros.core.phase import tempered_speed_posterior  # noqa: E402
 from mixture_ip_ros.core.promp import observation_stats, weight_posterior  # noqa: E402
 
@@ -152,9 +152,7 @@ def online(model, warps, demo, config, etas):
 def speeds(evidence, log_prior, eta):
     """The grid speeds holding the tempered posterior (OnlineEstimator.speed_hypotheses): their
     indices and renormalised probabilities."""
-    p = np.exp(tempered_speed_posterior(evidence, log_prior, eta))
-    keep = np.flatnonzero(p >= SPEED_SUPPORT * p.max())
-    return keep, p[keep] / p[keep].sum()
+    return supported(np.exp(tempered_speed_posterior(evidence, log_prior, eta)))
 
 
 def known_duration(comp, warps, demo, config):

@@ -24,9 +24,18 @@ from .phase import (alpha_grid, alpha_log_prior, log_density_on_grid, tempered_s
 from .promp import observation_stats, weight_posterior
 
 
-# Phase speeds less probable than this times the most probable one are left out of the
-# expected path (OnlineEstimator.speed_hypotheses).
+# Phase speeds, or components, less probable than this times the most probable one are left
+# out of the expected path (supported).
 SPEED_SUPPORT = 1e-3
+
+
+def supported(p):
+    """The hypotheses that hold a distribution ``p`` (probabilities, or weights of any scale):
+    (indices, probabilities renormalised over them). One less probable than SPEED_SUPPORT times
+    the most probable is left out: its share of a prediction is below that, and each one kept
+    costs a trajectory."""
+    keep = np.flatnonzero(p >= SPEED_SUPPORT * p.max())
+    return keep, p[keep] / p[keep].sum()
 
 
 def spaced(t: float, t_last: float, min_interval: float) -> bool:
@@ -573,14 +582,10 @@ class OnlineEstimator:
 
     def speed_hypotheses(self, component=None):
         """The phase speeds that hold component k's (k* if None) tempered posterior: (grid
-        indices, probabilities renormalised over them). A speed less probable than
-        SPEED_SUPPORT times the most probable one is left out (its share of a prediction is
-        below that, and each one costs a trajectory)."""
+        indices, probabilities renormalised over them): :func:`supported`."""
         k = self._map_indices()[0] if component is None else int(component)
         lw = self._speed_log_weights(k)
-        p = np.exp(lw - lw.max())
-        keep = np.flatnonzero(p >= SPEED_SUPPORT)
-        return keep, p[keep] / p[keep].sum()
+        return supported(np.exp(lw - lw.max()))
 
     def expected_controlled(self, times, component=None, derivatives: bool = True):
         """The controlled agent's expected path at ``times`` (s since onset) under component k
@@ -604,12 +609,9 @@ class OnlineEstimator:
         return (k, pos, vel, acc) if derivatives else (k, pos, None, None)
 
     def likely_components(self):
-        """The components that hold p(k | D): (indices, probabilities renormalised over them).
-        One less probable than SPEED_SUPPORT times the most probable is left out, as a speed is
-        in :meth:`speed_hypotheses`."""
-        p = self.component_posterior()
-        keep = np.flatnonzero(p >= SPEED_SUPPORT * p.max())
-        return keep, p[keep] / p[keep].sum()
+        """The components that hold p(k | D): (indices, probabilities renormalised over them),
+        :func:`supported`."""
+        return supported(self.component_posterior())
 
     def latest_end(self, components) -> float:
         """The end (s since onset) of the slowest phase speed holding any of ``components``'
