@@ -26,10 +26,9 @@ marginalised too is sent (every likely interaction's expected path weighted by p
 best prediction under squared error while the interaction is uncertain), so the robot is under
 way when it commits. Where the interaction comes to its point early (a handshake's hands can
 meet 1.5 s after its onset in NuiSI v2) the arm could not arrive in time from rest at
-commitment.
-Hedged plans are not a commit: they stop with a hold like committed ones when the movement is
-unexplained, and at the end of an interaction never committed no final plan is sent (the arm
-stays on the last one's final posture).
+commitment. Hedged plans are not a commit: they stop with a hold like committed ones when the
+movement is unexplained, and at the end of an interaction never committed no final plan is
+sent (the arm stays on the last one's final posture).
 """
 
 from collections import deque
@@ -157,7 +156,6 @@ class OnlinePlanner:
         self._trigger_ns = None   # its stamp
         self._dirty = False       # something new since the last replan
         self._sent_component = None
-        self._hedging = False     # hedged plans sent in this interaction
         self._final_time = None   # time of the last final (at rest) plan's point
 
     # -- settings ---------------------------------------------------------------------
@@ -230,7 +228,6 @@ class OnlinePlanner:
         self._trigger_ns = self._onset_ns
         self._dirty = True
         self._sent_component = None
-        self._hedging = False
         self._final_time = None
         self.state = 'observing'
         excess = len(self.interactions) + 1 - self._settings.max_records
@@ -406,7 +403,7 @@ class OnlinePlanner:
         if problem is not None:
             return Step(summary, plan, send=False, trigger_ns=trigger, problem=problem)
         plan = sendable
-        if unexplained is not None and (self.state == 'committed' or self._hedging):
+        if unexplained is not None and (self.state == 'committed' or rec.hedged_plans):
             # The robot moves, and what the person does now is no movement the model knows: it
             # stops where it is; this interaction gets no more plans.
             self.counts.holds += 1
@@ -422,7 +419,6 @@ class OnlinePlanner:
             rec.commit_phase, rec.commit_elapsed = summary.phase, t_now
             rec.commit_component, rec.commit_observations = k, est.n_observations
         if hedged:      # no component's plan: a switch is one committed plan to the next
-            self._hedging = True
             rec.hedged_plans += 1
         switched_from = None
         if self._sent_component is not None and k != self._sent_component:
