@@ -12,7 +12,7 @@ from mixture_ip_ros.core.phase import alpha_log_prior, log_evidence_batch
 from mixture_ip_ros.io.model_file import load_model
 from mixture_ip_ros.estimation.held import HeldSamples
 from mixture_ip_ros.estimation.planner import OnlinePlanner, PlannerSettings, should_commit
-from mixture_ip_ros.estimation.plans import (PHASE_EPS, SLOWDOWN_MARGIN, Plan, PosteriorSummary,
+from mixture_ip_ros.estimation.plans import (CATCH_UP_RESOLUTION, PHASE_EPS, SLOWDOWN_MARGIN, Plan, PosteriorSummary,
                                              build_plan, check_plan, posterior_summary,
                                              predicted_wrist)
 from mixture_ip_ros.estimation.records import LatencyStats
@@ -539,24 +539,77 @@ def test_interaction_records_are_bounded(trained):
                                                                    _ns(40.0)]
 
 
+def _limits(n, velocity, acceleration):
+    from mixture_ip_ros.estimation.plans import JointLimits
+    return JointLimits(np.full(n, -10.0), np.full(n, 10.0), np.full(n, velocity),
+                       np.full(n, acceleration))
+
+
+def _blend_ok(T, q, qd, p1, v1, limits):
+    """Whether the controller's blend (cubic from (q, qd) into (p1, v1) in T s) stays within
+    ``limits``, sampled at 401 instants (an oracle independent of blend_within_limits' vertex
+    and end-point analysis); the plan's own speed v1 clipped to the limits, as build_plan's."""
+    v1 = np.clip(v1, -limits.velocity, limits.velocity)
+    s = np.linspace(0.0, 1.0, 401)[:, None]   # Hermite basis derivatives at s = t / T
+    d00, d10, d01, d11 = 6 * s**2 - 6 * s, 3 * s**2 - 4 * s + 1, -6 * s**2 + 6 * s, 3 * s**2 - 2 * s
+    a00, a10, a01, a11 = 12 * s - 6, 6 * s - 4, -12 * s + 6, 6 * s - 2
+    speed = (d00 * q + d10 * T * qd + d01 * p1 + d11 * T * v1) / T
+    accel = (a00 * q + a10 * T * qd + a01 * p1 + a11 * T * v1) / T**2
+    return bool(np.all(np.abs(speed) <= np.maximum(limits.velocity, np.abs(qd)) + 1e-9)
+                and np.all(np.abs(accel) <= limits.acceleration + 1e-9))
+
+
 def test_catch_up_drops_points_the_robot_cannot_reach_in_time(trained):
-    """A robot far from the plan gets a later first point, reachable at catch_up_velocity."""
+    """An arm far from the plan gets a later first point, one the controller's blend from its
+    state reaches within the limits; an arm on the path, moving with it, gets the whole plan."""
     model, meta, demos = trained
     est = OnlineEstimator(model, n_alpha=10, min_interval=0.0)
     demo = demos[0]
-    for t, y in zip(demo.t[:40], demo.observed[:40]):
-        est.update(t, y)
+    est.offer_many(demo.t[:40], demo.observed[:40])
     t_now = demo.t[39]
     free = build_plan(est, t_now, n_points=25)
-    speed = np.full(model.n_controlled_, 0.5)
-    far = free.positions[0] + 1.0                       # 1 rad away on every joint: 2 s at 0.5
-    plan = build_plan(est, t_now, n_points=25, robot_q=far, catch_up_velocity=speed)
-    reach = t_now + np.max(np.abs(plan.positions - far) / speed, axis=1)
-    assert plan.times[0] >= reach[0] - 1e-12
+    limits = _limits(model.n_controlled_, 0.5, 20.0)
+    far = (free.positions[0] + 1.0, np.zeros(model.n_controlled_))   # at rest, 1 rad away
+    plan = build_plan(est, t_now, n_points=25, robot=far, limits=limits)
+    assert plan.times[0] >= t_now + 1.0 / 0.5
+    assert _blend_ok(plan.times[0] - t_now, *far, plan.positions[0], plan.velocities[0], limits)
     assert len(plan.times) < len(free.times)
     assert np.all(np.diff(plan.times) > 0)
-    near = build_plan(est, t_now, n_points=25, robot_q=free.positions[0], catch_up_velocity=speed)
-    assert np.allclose(near.times, free.times)
+    _, q, qd, _ = est.expected_controlled([t_now])
+    on_path = _limits(model.n_controlled_, 2 * np.abs(free.velocities).max(), 1e4)
+    near = build_plan(est, t_now, n_points=25, robot=(q[0], qd[0]), limits=on_path)
+    assert np.array_equal(near.times, free.times)
+
+
+def test_catch_up_rejoins_the_path_at_the_earliest_time_it_can_reach_it(trained):
+    """Behind its plan, the arm's first point is the earliest time on the expected path that
+    the controller's blend from its state reaches within the limits (a brute-force search at
+    1 ms), not the next of the plan's points that happens to be reachable; the points after it
+    are the free plan's."""
+    model, meta, demos = trained
+    est = OnlineEstimator(model, n_alpha=10, min_interval=0.0)
+    demo = demos[0]
+    est.offer_many(demo.t[:40], demo.observed[:40])
+    t_now = demo.t[39]
+    free = build_plan(est, t_now, n_points=6)
+    limits = _limits(model.n_controlled_, 1.0, 20.0)
+    robot = (free.positions[0] + 0.2, np.zeros(model.n_controlled_))   # at rest, 0.2 rad away
+    plan = build_plan(est, t_now, n_points=6, robot=robot, limits=limits)
+    kept = len(plan.times) - 1
+    assert 0 < kept < len(free.times) - 1      # a point dropped, one inserted before the rest
+    assert np.array_equal(plan.times[1:], free.times[-kept:])
+    assert np.array_equal(plan.positions[1:], free.positions[-kept:])
+    grid = np.arange(t_now + 0.1, plan.times[1], 1e-3)
+    _, pos, vel, _ = est.expected_controlled(grid)
+    reachable = [_blend_ok(t - t_now, *robot, p, v, limits) for t, p, v in zip(grid, pos, vel)]
+    earliest = grid[int(np.argmax(reachable))]
+    assert any(reachable)
+    assert earliest - 1e-3 <= plan.times[0] <= earliest + CATCH_UP_RESOLUTION
+    _, p0, v0, a0 = est.expected_controlled([plan.times[0]])
+    assert np.allclose(plan.positions[0], p0[0], rtol=0, atol=1e-12)
+    assert np.allclose(plan.velocities[0], v0[0], rtol=0, atol=1e-12)
+    assert _blend_ok(plan.times[0] - t_now, *robot, plan.positions[0], plan.velocities[0],
+                     limits)
 
 
 def test_plan_starts_from_the_present_when_observations_lag(trained):

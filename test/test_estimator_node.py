@@ -429,14 +429,14 @@ def test_lifecycle_services_and_parameter_descriptions(estimator, trained):
     client = AsyncParameterClient(h.probe, 'estimator_node')
     h.spin_until(lambda: client.services_are_ready(), what='parameter services')
     described = {d.name: d for d in h.result(client.describe_parameters(
-        ['confidence_threshold', 'n_alpha', 'model_path', 'catch_up_velocity'])).descriptors}
+        ['confidence_threshold', 'n_alpha', 'model_path', 'settle_time'])).descriptors}
     ct = described['confidence_threshold']
     assert ct.type == ParameterType.PARAMETER_DOUBLE and not ct.read_only
     assert (ct.floating_point_range[0].from_value, ct.floating_point_range[0].to_value) == (0, 1)
     assert 'p(k* | D)' in ct.description
     assert described['n_alpha'].read_only and described['n_alpha'].integer_range[0].from_value == 1
     assert described['model_path'].read_only and described['model_path'].description
-    assert 'positive' in described['catch_up_velocity'].description
+    assert '> 0' in described['settle_time'].description
 
     # deactivate mid-interaction: the controller is told to stop (an empty trajectory), no
     # plan goes out any more, and the interaction ends
@@ -480,8 +480,6 @@ def test_refuses_to_configure_without_a_usable_model(harness, trained, tmp_path)
              joint_names=[f'lbr_joint_{i}' for i in range(1, 8)])
     _refusal(harness, "frame 'iiwa_link_0'.*'world'", model_path=str(model_path),
              observed_frame='world')
-    _refusal(harness, 'catch_up_velocity: 7 joints need 7 speeds', model_path=str(model_path),
-             catch_up_velocity=[1.0, 1.0])
     # a model whose observed agent is not a 3-D point
     demos = mixture_demos(seed=3, n_obs=2, n_ctrl=7, n_basis=8)[0]
     two_d = save_model(tmp_path / 'planar.npz', MixtureIProMP(3, n_basis=8).fit(demos),
@@ -493,7 +491,7 @@ def test_refuses_to_configure_without_a_usable_model(harness, trained, tmp_path)
     ({'confidence_threshold': 1.5}, 'confidence_threshold'),
     ({'n_points': 1}, 'n_points'),
     ({'min_interval': float('nan')}, 'min_interval'),
-    ({'catch_up_velocity': [1.0, float('nan')] + [1.0] * 5}, 'catch_up_velocity'),
+    ({'settle_time': 0.0}, 'settle_time'),
     ({'replan_rate_hz': 10}, 'replan_rate_hz'),
 ])
 def test_invalid_parameters_are_refused_at_start_naming_the_parameter(ros_context, params,

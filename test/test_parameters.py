@@ -62,7 +62,6 @@ def test_nodes_load_their_config_file(ros_context, node_class, node):
 def test_the_robot_parameter_gives_the_defaults_of_its_fields(ros_context, node_class):
     """Each shipped robot's description (read independently here) gives the node's from_robot
     fields; the schema's defaults are the default robot's; a value given explicitly wins."""
-    from mixture_ip_ros.robot.kinematics import RobotKinematics
     schema = {n: (d, s) for n, d, s in specs(node_class.SCHEMA)}
     derived = sorted(n for n, (_, s) in schema.items() if s.from_robot)
     assert derived and list(schema).index('robot') < min(list(schema).index(n) for n in derived)
@@ -70,9 +69,8 @@ def test_the_robot_parameter_gives_the_defaults_of_its_fields(ros_context, node_
     def independent(robot):
         d = load_description(robot)
         to_base = d.world_to_base()
-        velocity = RobotKinematics(robot).velocity_limit
         return {'joint_names': list(d.joint_names), 'observed_frame': d.base_frame,
-                'base_frame': d.base_frame, 'catch_up_velocity': list(0.5 * velocity),
+                'base_frame': d.base_frame,
                 'initial_positions': list(d.home), 'natural_frequency': list(d.gains()[0]),
                 'damping_ratio': list(d.gains()[1]),
                 'mocap_to_base_xyz': list(to_base.translation),

@@ -6,11 +6,12 @@ The acceptance rules and the simulation's handling of rejections run for every s
 import numpy as np
 import pytest
 
+from mixture_ip_ros.estimation.blending import (REACH_RESOLUTION, earliest_reach,
+                                                segment_coefficients)
 from mixture_ip_ros.robot.description import JOINT_NAMES, load_description, shipped_robots
 from mixture_ip_ros.robot.sim import RobotSimulation
-from mixture_ip_ros.robot.trajectory import (REACH_RESOLUTION, JointTrajectory,
-                                             TrajectoryFollower, TrajectoryPoint, earliest_reach,
-                                             points_from_arrays, segment_coefficients,
+from mixture_ip_ros.robot.trajectory import (JointTrajectory, TrajectoryFollower,
+                                             TrajectoryPoint, points_from_arrays,
                                              validate_trajectory)
 
 J7 = list(JOINT_NAMES)   # the interpolation tests' joints (the default robot's)

@@ -6,7 +6,7 @@ observer, then estimator), as an operator would. The sim node owns the clock (/c
 ``real_time_factor``), every other node runs with use_sim_time, and the player publishes each
 bag message when the simulated clock reaches its recorded time (stamps rewritten to that time).
 The robot is one option, ``robot``: every node gets it as its ``robot`` parameter (joint names,
-frames, mocap transform, catch-up speeds, limits and the simulated arm follow from its
+frames, mocap transform, limits and the simulated arm follow from its
 description). Used by ``mixture-ip demo`` and the integration tests.
 
 ``command_delay`` (s of simulated time) puts a slow link between the estimator and the sim: the

@@ -130,19 +130,19 @@ class OnlinePlanner:
     """
 
     def __init__(self, estimator, settings: PlannerSettings = PlannerSettings(), *,
-                 labels=None, catch_up_velocity=None, limits: Optional[JointLimits] = None,
+                 labels=None, limits: Optional[JointLimits] = None,
                  novelty: Optional[NoveltyThresholds] = None):
         if labels is not None and len(labels) != estimator.n_components:
             raise ValueError(f'{len(labels)} component labels for {estimator.n_components} '
                              'components')
         self.estimator = estimator
         self.labels = None if labels is None else list(labels)
-        self.catch_up_velocity = (None if catch_up_velocity is None
-                                  else np.asarray(catch_up_velocity, dtype=float))
-        self.limits = limits      # JointLimits: no plan beyond them is ever sent
+        # JointLimits: no plan beyond them is ever sent, and plans start where the arm can
+        # reach them within these (estimation.plans.build_plan)
+        self.limits = limits
         # Commit only to movements the model explains (core.novelty); None: on confidence alone.
         self._novelty = None if novelty is None else NoveltyMonitor(novelty)
-        self.robot_q = None       # latest robot joints (set by the node), for catching up
+        self.robot_state = None   # the arm's latest (joints, joint speeds), set by the node
         self.state = 'idle'
         self.interactions = []
         self.counts = ObservationCounts()
@@ -393,8 +393,8 @@ class OnlinePlanner:
         plan = build_plan(est, t_plan, n_points=s.n_points, lookahead=s.lookahead,
                           settle_time=s.settle_time, component=k,
                           alpha=summary.alpha if ended else None,
-                          final_time=self._final_time, robot_q=self.robot_q,
-                          catch_up_velocity=self.catch_up_velocity,
+                          final_time=self._final_time, robot=self.robot_state,
+                          limits=self.limits,
                           final_position=self._y_latest if final and not hedged else None,
                           hedged=hedged)
         trigger = self._trigger_ns

@@ -29,6 +29,7 @@ from typing import Optional, Tuple
 import numpy as np
 
 from mixture_ip_ros.estimation._fast import PLAN_PROBLEMS, limit_ratios, linspace, plan_problem
+from mixture_ip_ros.estimation.blending import blend_kind, blend_within_limits, earliest_reach
 
 PHASE_EPS = 1e-6
 # A plan would have to be slowed down more than this to respect the joint speed limits: it is
@@ -37,6 +38,14 @@ MAX_TIME_SCALE = 4.0
 # A plan slowed down to its limits is slowed this much more (relative): times sent as whole
 # nanoseconds and rounded divisions would put one exactly at a limit just beyond it.
 SLOWDOWN_MARGIN = 1e-6
+# An arm behind its plan rejoins the path at the earliest time it can reach, found to within
+# this (s) between the plan's points: they are spread over the whole movement (0.5 s apart in a
+# 13 s wave), and rejoining at the next point that happened to be reachable took the arm past a
+# handshake's grip.
+CATCH_UP_RESOLUTION = 0.01
+# The controller blends from the arm's state (positions and velocities) into a first point that
+# has velocities and accelerations, as the plans' points do.
+BLEND = blend_kind(True, True)
 
 
 @dataclass(frozen=True)
@@ -106,17 +115,20 @@ class Plan:
 def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float = 0.1,
                settle_time: float = 0.5, component: Optional[int] = None,
                alpha: Optional[float] = None, final_time: Optional[float] = None,
-               robot_q=None, catch_up_velocity=None, final_position=None,
+               robot=None, limits=None, final_position=None,
                hedged: bool = False) -> Plan:
     """The plan from ``t_now`` (s since onset) on, for ``component`` (default: the MAP one),
     the phase speed marginalised, or at phase speed ``alpha`` if given.
 
     ``final_time``: when the human is at rest, the time of the final point if it is at least
     ``lookahead`` ahead of ``t_now`` (else ``t_now + max(lookahead, settle_time)``).
-    ``robot_q``/``catch_up_velocity``: the robot's current joints and the joint speeds it may
-    use to catch up with the plan. Points it cannot reach in time at those speeds are dropped
-    (the controller blends from its state into the first kept point); if none is reachable the
-    plan is the last point, timed when it can be reached. Without them, no catch-up limit.
+    ``robot``/``limits``: the arm's present joints and joint speeds (q, qd) and its
+    JointLimits. The points it cannot reach in time are dropped: those into which the
+    controller's blend from (q, qd) would exceed the speed or acceleration limits (the
+    controller's own rule, estimation.blending.blend_within_limits). The plan then starts at the
+    earliest time on the path that the blend reaches within them (to CATCH_UP_RESOLUTION), so
+    the arm rejoins the path as soon as it can. If no point is reachable, the plan is the last
+    point, timed when the blend can reach it. Without them, every point is kept.
     ``final_position``: the human's movement has ended here (the observer's 'end'): the plan is
     the single final posture conditioned on this final position at z = 1
     (``OnlineEstimator.predict_at_rest``).
@@ -155,14 +167,19 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
     else:
         phases = linspace(a * (t_now + lookahead), 1.0, n_points)
         times = phases / a
-    if hedged:
-        k = component
-        pos, vel, acc = estimator.predictive_controlled(np.maximum(times, t_end) if final
-                                                        else times)
-    elif marginal:
+    speed = a
+
+    def path(at):
+        """The plan's positions, velocities and accelerations at times ``at``."""
+        if hedged:
+            return estimator.predictive_controlled(at)
+        if marginal:
+            return estimator.expected_controlled(at, component=component)[1:]
+        return estimator.mean_trajectories(speed * at, component=component, alpha=speed)[2]
+    if marginal:
         # past every hypothesis's end (a final plan) each one holds its final posture
-        k, pos, vel, acc = estimator.expected_controlled(
-            np.maximum(times, t_end) if final else times, component=component)
+        k = int(component)
+        pos, vel, acc = path(np.maximum(times, t_end) if final else times)
     else:
         # a: the grid value actually used (identical when it came from the grid)
         k, a, (pos, vel, acc), _ = estimator.mean_trajectories(phases, component=component,
@@ -171,14 +188,37 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
     acc[-1] = 0.0
     if final_position is not None:
         pos[-1] = estimator.predict_at_rest(final_position, component=k)[0]
-    if robot_q is not None and catch_up_velocity is not None:
-        reachable_at = t_now + np.max(np.abs(pos - np.asarray(robot_q))
-                                      / np.asarray(catch_up_velocity), axis=1)
-        ok = np.flatnonzero(times >= reachable_at)
+    if robot is not None and limits is not None:
+        q, qd = (np.asarray(x, dtype=float) for x in robot)
+
+        def reachable(at, p, v):
+            # The plan's own speed is within_limits' to check (it slows a plan down); here only
+            # whether the arm gets onto the path.
+            return blend_within_limits(at - t_now, q, qd, p, np.clip(v, -limits.velocity,
+                                                                      limits.velocity),
+                                       BLEND, limits.velocity, limits.acceleration)
+        ok = np.flatnonzero(reachable(times, pos, vel))
         first = ok[0] if ok.size else len(times) - 1
-        times = times.copy()
-        times[first] = max(times[first], reachable_at[first])
         phases, times, pos, vel, acc = (x[first:] for x in (phases, times, pos, vel, acc))
+        if not ok.size:
+            reach = earliest_reach(q, qd, pos[0], np.clip(vel[0], -limits.velocity,
+                                                          limits.velocity),
+                                   BLEND, limits.velocity, limits.acceleration, times[0] - t_now)
+            if reach is not None:
+                times = np.r_[max(times[0], t_now + reach)]
+        elif first > 0:
+            # the earliest time on the path the arm reaches in time, before that point
+            probe = np.arange(t_now + lookahead, times[0] - 0.5 * CATCH_UP_RESOLUTION,
+                              CATCH_UP_RESOLUTION)
+            if probe.size:
+                at = path(probe)
+                hit = np.flatnonzero(reachable(probe, at[0], at[1]))
+                if hit.size:
+                    i = hit[0]
+                    pos, vel, acc = (np.concatenate([x[i:i + 1], y])
+                                     for x, y in zip(at, (pos, vel, acc)))
+                    times = np.r_[probe[i], times]
+                    phases = np.r_[min(speed * probe[i], 1.0), phases]
     return Plan(times=times, phases=phases, positions=pos, velocities=vel, accelerations=acc,
                 component=k, alpha=a, final=bool(final))
 

@@ -4,7 +4,7 @@ node; the logic is estimation.planner's, on the node clock.
 
 Subscribes  observation_topic  geometry_msgs/PointStamped (frame observed_frame), reliable
             event_topic        std_msgs/Header, frame_id 'onset' | 'end' | 'gap', reliable
-            joint_state_topic  sensor_msgs/JointState (the robot's joints, to time catching up)
+            joint_state_topic  sensor_msgs/JointState (the arm's state, to time catching up)
 Publishes   trajectory_topic   trajectory_msgs/JointTrajectory, reliable: header.stamp = the
                 stamp of the latest observation the plan rests on (what triggered it; the
                 'end' event's stamp for the last plan), joint names of the model, points from
@@ -51,7 +51,7 @@ from mixture_ip_ros.nodes import qos
 from mixture_ip_ros.nodes.diagnostics import OK, WARN, PublishesDiagnostics, diagnostic_array
 from mixture_ip_ros.nodes.managed import ManagedNode, run_node
 from mixture_ip_ros.nodes.markers import prediction_markers
-from mixture_ip_ros.nodes.params import (autostart_param, event_topic_param, finite_list,
+from mixture_ip_ros.nodes.params import (autostart_param, event_topic_param,
                                          observation_topic_param, param, positive)
 from mixture_ip_ros.robot.description import (BASE_FRAME, DEFAULT_ROBOT, JOINT_NAMES,
                                               shipped_robots)
@@ -61,22 +61,14 @@ N_OBSERVED = 3   # a PointStamped carries x, y, z
 DIAGNOSTIC_NAME = 'estimator_node: estimation'
 
 
-def _catch_up_velocity(kinematics: RobotKinematics) -> list:
-    # Half the limits: a catch-up move must leave room for the plan's own speed on top.
-    return (0.5 * kinematics.velocity_limit).tolist()
-
-
-_DEFAULT_CATCH_UP = _catch_up_velocity(RobotKinematics(DEFAULT_ROBOT))
-
-
 @dataclass
 class EstimatorParameters:
     autostart: bool = autostart_param()
     model_path: str = param('', 'trained model file (.npz from mixture-ip train); required')
     observation_topic: str = observation_topic_param()
     event_topic: str = event_topic_param()
-    joint_state_topic: str = param('/joint_states', "the robot's joints, to time catching up "
-                                                    'with a plan')
+    joint_state_topic: str = param('/joint_states', "the robot's joints and their speeds, to "
+                                                    'time catching up with a plan')
     trajectory_topic: str = param('joint_trajectory', 'trajectory_msgs/JointTrajectory to '
                                                       "the robot's controller (relative: "
                                                       "in the node's namespace)")
@@ -86,9 +78,9 @@ class EstimatorParameters:
                                                          'alpha, phase, confidence, k]')
     marker_topic: str = param('/estimator/markers', 'visualization_msgs/MarkerArray for RViz')
     robot: str = param(DEFAULT_ROBOT, 'the robot: a shipped name (' + ', '.join(shipped_robots())
-                       + ') or a description file. It gives the defaults of joint_names, '
-                       'observed_frame and catch_up_velocity, and the joint limits no plan '
-                       'exceeds')
+                       + ') or a description file. It gives the defaults of joint_names and '
+                       'observed_frame, and the joint limits: no plan exceeds them, and a plan '
+                       'starts where the arm can reach it within them')
     joint_names: list = param(list(JOINT_NAMES), "the robot's joints; must equal the model's "
                                                  'controlled names', from_robot=True)
     observed_frame: str = param(BASE_FRAME, "frame of the observations (the robot's base "
@@ -124,10 +116,6 @@ class EstimatorParameters:
     settle_time: float = param(0.5, 's; the person at rest: the final posture is reached this '
                                     'long after the latest observation', low=0.0, high=60.0,
                                check=positive, rule='> 0')
-    catch_up_velocity: list = param(_DEFAULT_CATCH_UP, "rad/s per joint (half the robot's "
-                                    'velocity limits); plan points the robot cannot reach at '
-                                    'these are dropped', check=finite_list(positive_values=True),
-                                    rule='one positive speed per joint', from_robot=True)
     diagnostics_period: float = param(1.0, 's between /diagnostics messages', low=0.001,
                                       high=3600.0)
     hold_window: float = param(2.5, 's of observations held outside an interaction: well over '
@@ -169,8 +157,7 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
     def robot_defaults(robot: str) -> dict:
         kinematics = RobotKinematics(robot)
         return {'joint_names': list(kinematics.joint_names),
-                'observed_frame': kinematics.description.base_frame,
-                'catch_up_velocity': _catch_up_velocity(kinematics)}
+                'observed_frame': kinematics.description.base_frame}
 
     # -- lifecycle ----------------------------------------------------------------------
     def configure(self) -> None:
@@ -178,9 +165,6 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
         if not p.model_path:
             raise ValueError('parameter model_path is empty: give a trained model file '
                              '(--ros-args -p model_path:=/path/to/model.npz)')
-        if len(p.catch_up_velocity) != len(p.joint_names):
-            raise ValueError(f'parameter catch_up_velocity: {len(p.joint_names)} joints need '
-                             f'{len(p.joint_names)} speeds, got {len(p.catch_up_velocity)}')
         model, meta = load_model(p.model_path, controlled_names=p.joint_names)
         if model.n_observed_ != N_OBSERVED:
             raise ValueError(f'model file {p.model_path}: the observed agent has '
@@ -217,8 +201,7 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
                 f'({", ".join(robot.joint_names)}): plans are not checked against joint limits')
         self.planner = OnlinePlanner(self.estimator, self._planner_settings(p),
                                      labels=meta.get('component_labels'),
-                                     catch_up_velocity=p.catch_up_velocity, novelty=novelty,
-                                     limits=limits)
+                                     novelty=novelty, limits=limits)
         self._posterior_encoder = Float64MultiArrayEncoder(
             ','.join(PosteriorSummary.labels(model.n_components)))
         self._trajectory_encoder = JointTrajectoryEncoder(p.joint_names)
@@ -379,9 +362,13 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
     def on_joint_state(self, msg: JointState) -> None:
         try:
             index = {name: i for i, name in enumerate(msg.name)}
-            q = np.array([msg.position[index[n]] for n in self.params.joint_names])
-            if np.all(np.isfinite(q)):
-                self.planner.robot_q = q
+            rows = [index[n] for n in self.params.joint_names]
+            q = np.array([msg.position[i] for i in rows])
+            # A state without speeds (some drivers publish none) is taken as at rest.
+            qd = (np.array([msg.velocity[i] for i in rows]) if len(msg.velocity) == len(msg.name)
+                  else np.zeros(len(rows)))
+            if np.all(np.isfinite(q)) and np.all(np.isfinite(qd)):
+                self.planner.robot_state = (q, qd)
         except (KeyError, IndexError):
             self.planner.reject('bad_joint_state')
 
