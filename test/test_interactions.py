@@ -39,7 +39,7 @@ def test_the_shipped_settings_load():
     assert c.data == 'v2' and c.person1_yaw == pytest.approx(math.pi)
     assert c.rest_after >= c.observer['end_hold']
     assert interactions.segmentation(c) == {'end_hold': 1.0}
-    assert interactions.estimator_settings(c) == {'lookahead': 0.3, 'hedge': True}
+    assert interactions.estimator_settings(c) == {'hedge': True}
 
 
 @pytest.mark.parametrize('change, message', [
