@@ -559,14 +559,18 @@ def _blend_ok(T, q, qd, p1, v1, limits):
                 and np.all(np.abs(accel) <= limits.acceleration + 1e-9))
 
 
+def _forty_observed(trained):
+    """(model, an estimator fed the first 40 samples of a held-out demonstration, their end)."""
+    model, _, demos = trained
+    est = OnlineEstimator(model, n_alpha=10, min_interval=0.0)
+    est.offer_many(demos[0].t[:40], demos[0].observed[:40])
+    return model, est, demos[0].t[39]
+
+
 def test_catch_up_drops_points_the_robot_cannot_reach_in_time(trained):
     """An arm far from the plan gets a later first point, one the controller's blend from its
     state reaches within the limits; an arm on the path, moving with it, gets the whole plan."""
-    model, meta, demos = trained
-    est = OnlineEstimator(model, n_alpha=10, min_interval=0.0)
-    demo = demos[0]
-    est.offer_many(demo.t[:40], demo.observed[:40])
-    t_now = demo.t[39]
+    model, est, t_now = _forty_observed(trained)
     free = build_plan(est, t_now, n_points=25)
     limits = _limits(model.n_controlled_, 0.5, 20.0)
     far = (free.positions[0] + 1.0, np.zeros(model.n_controlled_))   # at rest, 1 rad away
@@ -586,11 +590,7 @@ def test_catch_up_rejoins_the_path_at_the_earliest_time_it_can_reach_it(trained)
     the controller's blend from its state reaches within the limits (a brute-force search at
     1 ms), not the next of the plan's points that happens to be reachable; the points after it
     are the free plan's."""
-    model, meta, demos = trained
-    est = OnlineEstimator(model, n_alpha=10, min_interval=0.0)
-    demo = demos[0]
-    est.offer_many(demo.t[:40], demo.observed[:40])
-    t_now = demo.t[39]
+    model, est, t_now = _forty_observed(trained)
     free = build_plan(est, t_now, n_points=6)
     limits = _limits(model.n_controlled_, 1.0, 20.0)
     robot = (free.positions[0] + 0.2, np.zeros(model.n_controlled_))   # at rest, 0.2 rad away
