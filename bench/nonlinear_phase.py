@@ -210,33 +210,39 @@ def aligned_phases(y, template, open_end):
     return out
 
 
-def horizons(comp, est, demo, config, mean_duration):
-    """Partner RMS h ahead of each replan instant, per method: {name: [per horizon]};
-    ``mean_duration``: of the component's training recordings (the DTW template's sampling)."""
+def horizons(comps, k, est, demo, config, durations):
+    """Partner RMS h ahead of each replan instant, per method: {name: [per horizon]}. ``comps``:
+    every component's Observed; ``k``: the recording's own (the oracles'; the causal DTW takes
+    the estimator's MAP component, as the package does); ``durations``: each component's mean
+    training duration (its DTW template's sampling)."""
     rows = observed_rows(demo)
     used = rows[decimated_rows(demo.t[rows], config.min_interval)]
     T = demo.duration
     # the sensor's sample interval after decimation (a property of the stream, not of the future)
     dt = float(np.median(np.diff(demo.t[used])))
-    z = np.linspace(0.0, 1.0, max(2, int(round(2 * mean_duration / dt))))
-    template = (z, comp.model.basis_(z) @ comp.mean.reshape(-1, comp.model.n_basis).T)
-    whole = aligned_phases(demo.observed[used], template, open_end=False)
+
+    def template(c):
+        z = np.linspace(0.0, 1.0, max(2, int(round(2 * durations[c] / dt))))
+        return z, comps[c].model.basis_(z) @ comps[c].mean.reshape(-1, comps[c].model.n_basis).T
+    templates = [template(c) for c in range(len(comps))]
+    whole = aligned_phases(demo.observed[used], templates[k], open_end=False)
     names = ("the package's estimator", 'T known', 'aligned on the whole recording (DTW, an '
-             'oracle)', 'aligned on the prefix (open-end DTW), ahead at the MAP speed')
+             'oracle)', "aligned on the prefix (open-end DTW; the MAP component), ahead at the "
+             'MAP speed')
     err = {name: {h: [] for h in HORIZONS} for name in names}
-    truth = [np.interp(np.arange(0.0, T + 1e-9, 0.01), demo.t, demo.controlled[:, j])
-             for j in range(demo.n_controlled_dofs)]
+    recorded = ~np.isnan(demo.controlled).any(axis=1)
 
     def partner_at(t):
-        return np.array([x[int(round(t / 0.01))] for x in truth])
+        return np.array([np.interp(t, demo.t[recorded], demo.controlled[recorded, j])
+                         for j in range(demo.n_controlled_dofs)])
     for cut in prefixes(est, demo, np.arange(REPLAN_FROM * T, T, REPLAN_STEP)):
         sel = demo.t[used] <= cut + 1e-9
         t_seen, y = demo.t[used][sel], demo.observed[used][sel]
-        known = comp.posterior(t_seen / T, y)[0]
-        oracle = comp.posterior(whole[sel], y)[0]
-        z_prefix = aligned_phases(y, template, open_end=True)
-        causal = comp.posterior(z_prefix, y)[0]
-        alpha = est.map_hypothesis()[1]
+        known = comps[k].posterior(t_seen / T, y)[0]
+        oracle = comps[k].posterior(whole[sel], y)[0]
+        k_map, alpha = est.map_hypothesis()
+        z_prefix = aligned_phases(y, templates[k_map], open_end=True)
+        causal = comps[k_map].posterior(z_prefix, y)[0]
         for h in HORIZONS:
             t = cut + h
             if t > T:
@@ -244,9 +250,9 @@ def horizons(comp, est, demo, config, mean_duration):
             z_whole = np.interp(t, demo.t[used], whole)
             z_ahead = min(z_prefix[-1] + alpha * (t - t_seen[-1]), 1.0)
             preds = (est.expected_controlled([t], derivatives=False)[1][0],
-                     comp.partner(known, np.array([t / T]))[0],
-                     comp.partner(oracle, np.array([z_whole]))[0],
-                     comp.partner(causal, np.array([z_ahead]))[0])
+                     comps[k].partner(known, np.array([t / T]))[0],
+                     comps[k].partner(oracle, np.array([z_whole]))[0],
+                     comps[k_map].partner(causal, np.array([z_ahead]))[0])
             for name, p in zip(names, preds):
                 err[name][h].append(float(np.sum((p - partner_at(t)) ** 2)))
     return {name: [float(np.sqrt(np.mean(e[h]))) if e[h] else np.nan for h in HORIZONS]
@@ -279,6 +285,7 @@ def version(v, prior_sd):
         linear = np.zeros((len(names), N_WARP))
         durations = [np.mean([d.duration for d, c in zip(train, comp_of) if c == k])
                      for k in range(len(names))]
+        observed = [Observed(model, c, config.min_interval) for c in range(len(names))]
         est = OnlineEstimator(model, n_alpha=config.n_alpha, min_interval=config.min_interval)
         for i in test_i:
             d = demos[i]
@@ -306,8 +313,7 @@ def version(v, prior_sd):
             add("online, the package's estimator",
                 [rms(p.controlled, d.controlled[p.rest])
                  for p in prefix_predictions(est, d, FRACTIONS)])
-            for name, r in horizons(Observed(model, k, config.min_interval), est, d, config,
-                                    durations[k]).items():
+            for name, r in horizons(observed, k, est, d, config, durations).items():
                 add(name, r, ahead)
     return {'partner_rms_cm_mean_by_fraction': {
         name: [round(100 * float(x), 1) for x in np.mean(r, axis=0)] for name, r in rows.items()},

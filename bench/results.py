@@ -167,6 +167,7 @@ def phase_section(nl) -> list:
          ', '.join(f"{v} {len(nl[v]['warp_fits_not_converged'])}" for v in versions) + '.', '',
          '| phase model | ' + ' | '.join(f'NuiSI {v}' for v in versions) + ' |',
          '|---|' + '---|' * len(versions)]
+
     def table(key):
         for name in nl[versions[0]][key]:
             L.append(f'| {name} | ' + ' | '.join(

@@ -12,9 +12,9 @@ from mixture_ip_ros.core.phase import alpha_log_prior, log_evidence_batch
 from mixture_ip_ros.io.model_file import load_model
 from mixture_ip_ros.estimation.held import HeldSamples
 from mixture_ip_ros.estimation.planner import OnlinePlanner, PlannerSettings, should_commit
-from mixture_ip_ros.estimation.plans import (CATCH_UP_RESOLUTION, PHASE_EPS, SLOWDOWN_MARGIN, Plan, PosteriorSummary,
-                                             build_plan, check_plan, posterior_summary,
-                                             predicted_wrist)
+from mixture_ip_ros.estimation.plans import (CATCH_UP_RESOLUTION, PHASE_EPS, SLOWDOWN_MARGIN,
+                                             Plan, PosteriorSummary, build_plan, check_plan,
+                                             posterior_summary, predicted_wrist)
 from mixture_ip_ros.estimation.records import LatencyStats
 from mixture_ip_ros.estimation.schedule import ReplanSchedule
 from mixture_ip_ros.app.training import train_to_file
@@ -608,6 +608,21 @@ def test_catch_up_rejoins_the_path_at_the_earliest_time_it_can_reach_it(trained)
     _, p0, v0, a0 = est.expected_controlled([plan.times[0]])
     assert np.allclose(plan.positions[0], p0[0], rtol=0, atol=1e-12)
     assert np.allclose(plan.velocities[0], v0[0], rtol=0, atol=1e-12)
+    assert _blend_ok(plan.times[0] - t_now, *robot, plan.positions[0], plan.velocities[0],
+                     limits)
+
+
+def test_catch_up_keeps_the_path_after_the_arm_rejoins_it_and_never_divides_by_zero(trained):
+    """Every plan point after the time the arm rejoins the path is kept (none between is
+    skipped); with lookahead 0 the point due now counts as unreachable (no division by zero,
+    which the suite turns into an error), and the plan starts after the present."""
+    model, est, t_now = _forty_observed(trained)
+    free = build_plan(est, t_now, n_points=40, lookahead=0.0)
+    limits = _limits(model.n_controlled_, 1.0, 20.0)
+    robot = (free.positions[0] + 0.2, np.zeros(model.n_controlled_))
+    plan = build_plan(est, t_now, n_points=40, lookahead=0.0, robot=robot, limits=limits)
+    assert t_now < plan.times[0] < plan.times[1]
+    assert np.array_equal(plan.times[1:], free.times[free.times > plan.times[0] + 0.005])
     assert _blend_ok(plan.times[0] - t_now, *robot, plan.positions[0], plan.velocities[0],
                      limits)
 

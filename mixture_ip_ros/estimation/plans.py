@@ -10,7 +10,8 @@ trajectory, eq. 13, weighted by its tempered posterior), at ``n_points`` times e
 from ``t_now + lookahead`` to the end of the slowest speed hypothesis that holds the
 posterior, ``1 / min alpha_m``; or, for a given phase speed alpha (the end known), phases
 evenly spaced from ``alpha (t_now + lookahead)`` to 1 at ``times = z / alpha``. The first point
-lies ``lookahead`` ahead of the present so the controller gets a reachable target, and the last
+lies ``lookahead`` ahead of the present (later where the arm cannot reach the path sooner: see
+build_plan's ``robot``), and the last
 point's velocity and acceleration are zero (the human holds still past z = 1, and
 joint_trajectory_controller rejects a trajectory ending in motion). When ``t_now + lookahead``
 is past that end (the human is at rest) the plan is a single point: the predicted final
@@ -39,9 +40,8 @@ MAX_TIME_SCALE = 4.0
 # nanoseconds and rounded divisions would put one exactly at a limit just beyond it.
 SLOWDOWN_MARGIN = 1e-6
 # An arm behind its plan rejoins the path at the earliest time it can reach, found to within
-# this (s) between the plan's points: they are spread over the whole movement (0.5 s apart in a
-# 13 s wave), and rejoining at the next point that happened to be reachable took the arm past a
-# handshake's grip.
+# this (s): the plan's points are spread over the whole movement (0.5 s apart in a 13 s wave),
+# far coarser than the arm's reach changes.
 CATCH_UP_RESOLUTION = 0.01
 # The controller blends from the arm's state (positions and velocities) into a first point that
 # has velocities and accelerations, as the plans' points do.
@@ -193,32 +193,40 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
 
         def reachable(at, p, v):
             # The plan's own speed is within_limits' to check (it slows a plan down); here only
-            # whether the arm gets onto the path.
-            return blend_within_limits(at - t_now, q, qd, p, np.clip(v, -limits.velocity,
-                                                                      limits.velocity),
-                                       BLEND, limits.velocity, limits.acceleration)
+            # whether the arm gets onto the path. A point due now or earlier is not reachable.
+            T = np.asarray(at, dtype=float) - t_now
+            ok = T > 0
+            with np.errstate(divide='ignore', invalid='ignore'):
+                ok[ok] = blend_within_limits(T[ok], q, qd, p[ok], np.clip(
+                    v[ok], -limits.velocity, limits.velocity), BLEND, limits.velocity,
+                    limits.acceleration)
+            return ok
         ok = np.flatnonzero(reachable(times, pos, vel))
         first = ok[0] if ok.size else len(times) - 1
+        if first > 0:
+            # The earliest time on the path the arm reaches in time, before that point; the
+            # plan's points after it are kept (the arm follows the path from there).
+            probe = np.arange(times[0], times[first] - 0.5 * CATCH_UP_RESOLUTION,
+                              CATCH_UP_RESOLUTION)
+            at = path(probe) if probe.size else None
+            hit = np.flatnonzero(reachable(probe, at[0], at[1])) if probe.size else probe
+            if hit.size:
+                i = hit[0]
+                keep = np.flatnonzero(times > probe[i] + 0.5 * CATCH_UP_RESOLUTION)
+                pos, vel, acc = (np.concatenate([x[i:i + 1], y[keep]])
+                                 for x, y in zip(at, (pos, vel, acc)))
+                phases = np.r_[min(speed * probe[i], 1.0), phases[keep]]
+                times = np.r_[probe[i], times[keep]]
+                ok = np.array([0])
+                first = 0
         phases, times, pos, vel, acc = (x[first:] for x in (phases, times, pos, vel, acc))
         if not ok.size:
             reach = earliest_reach(q, qd, pos[0], np.clip(vel[0], -limits.velocity,
                                                           limits.velocity),
-                                   BLEND, limits.velocity, limits.acceleration, times[0] - t_now)
+                                   BLEND, limits.velocity, limits.acceleration,
+                                   max(times[0] - t_now, 0.0))
             if reach is not None:
                 times = np.r_[max(times[0], t_now + reach)]
-        elif first > 0:
-            # the earliest time on the path the arm reaches in time, before that point
-            probe = np.arange(t_now + lookahead, times[0] - 0.5 * CATCH_UP_RESOLUTION,
-                              CATCH_UP_RESOLUTION)
-            if probe.size:
-                at = path(probe)
-                hit = np.flatnonzero(reachable(probe, at[0], at[1]))
-                if hit.size:
-                    i = hit[0]
-                    pos, vel, acc = (np.concatenate([x[i:i + 1], y])
-                                     for x, y in zip(at, (pos, vel, acc)))
-                    times = np.r_[probe[i], times]
-                    phases = np.r_[min(speed * probe[i], 1.0), phases]
     return Plan(times=times, phases=phases, positions=pos, velocities=vel, accelerations=acc,
                 component=k, alpha=a, final=bool(final))
 

@@ -198,7 +198,8 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
             limits = self._hand = None
             self.get_logger().warning(
                 f'joint_names are not the joints of robot {p.robot!r} '
-                f'({", ".join(robot.joint_names)}): plans are not checked against joint limits')
+                f'({", ".join(robot.joint_names)}): plans are not checked against joint limits, '
+                'and an arm behind a plan is not caught up')
         self.planner = OnlinePlanner(self.estimator, self._planner_settings(p),
                                      labels=meta.get('component_labels'),
                                      novelty=novelty, limits=limits)
@@ -365,10 +366,13 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
             rows = [index[n] for n in self.params.joint_names]
             q = np.array([msg.position[i] for i in rows])
             # A state without speeds (some drivers publish none) is taken as at rest.
-            qd = (np.array([msg.velocity[i] for i in rows]) if len(msg.velocity) == len(msg.name)
+            qd = (np.array([msg.velocity[i] for i in rows]) if len(msg.velocity)
                   else np.zeros(len(rows)))
-            if np.all(np.isfinite(q)) and np.all(np.isfinite(qd)):
-                self.planner.robot_state = (q, qd)
+            if len(msg.velocity) not in (0, len(msg.name)) or not (
+                    np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
+                self.planner.reject('bad_joint_state')
+                return
+            self.planner.robot_state = (q, qd)
         except (KeyError, IndexError):
             self.planner.reject('bad_joint_state')
 
