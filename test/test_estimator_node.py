@@ -17,6 +17,7 @@ from rcl_interfaces.msg import ParameterType
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
+from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Header
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
@@ -355,6 +356,38 @@ def test_bad_input_is_counted_and_the_node_keeps_working(estimator, trained):
     st = e.wait_for('diagnostics', 2).status[0]
     assert st.level == st.OK and {kv.key: kv.value for kv in st.values}[
         'rejected_wrong_frame'] == '1'
+
+
+def test_joint_states_set_the_arm_state_and_bad_ones_are_counted_not_taken(estimator):
+    e = estimator(**MANUAL)
+    planner, pub = e.node.planner, e.h.publisher(JointState, '/joint_states')
+    e.h.matched(pub)
+    q = np.linspace(-0.3, 0.3, len(JOINT_NAMES))
+
+    def send(names, position, velocity, then):
+        pub.publish(JointState(name=list(names), position=[float(x) for x in position],
+                               velocity=[float(x) for x in velocity]))
+        e.h.spin_until(then, what='the joint state handled')
+
+    def rejected():
+        return planner.counts.rejected['bad_joint_state']
+    # an extra joint and another order: each joint is taken by its name
+    names = ['gripper'] + list(JOINT_NAMES)[::-1]
+    send(names, np.r_[0.04, q[::-1]], np.r_[0.0, 2 * q[::-1]],
+         lambda: planner.robot_state is not None)
+    assert np.array_equal(planner.robot_state[0], q)
+    assert np.array_equal(planner.robot_state[1], 2 * q)
+    good = planner.robot_state
+    bad = [(JOINT_NAMES, q, 2 * q[:-1]),                  # speeds that do not match the names
+           (JOINT_NAMES, q, np.r_[np.nan, q[1:]]),        # a speed not finite
+           (JOINT_NAMES, np.r_[q[:-1], np.inf], q),       # a position not finite
+           (JOINT_NAMES[:-1], q[:-1], q[:-1])]            # a joint missing
+    for n, (names, position, velocity) in enumerate(bad, start=1):
+        send(names, position, velocity, lambda: rejected() == n)
+        assert planner.robot_state is good
+    send(JOINT_NAMES, q, [], lambda: planner.robot_state is not good)    # no speeds: at rest
+    assert np.array_equal(planner.robot_state[1], np.zeros(len(q)))
+    assert rejected() == 4
 
 
 def test_replans_follow_simulated_time(estimator, trained):
