@@ -33,6 +33,13 @@ from a DTW alignment of the observed path to its component's mean: of the whole 
 oracle of perfect phase tracking: any monotone phase, chosen knowing the future) and of the
 prefix only (open-end DTW, causal; ahead of the present at the estimator's MAP speed).
 
+And how much the beginning of a recording tells of its duration, which the linear phase needs
+to place the rest of the partner's movement in time: after 30 / 50 / 70 %, the error of four
+causal estimates of T (the component's mean duration, the package's speed posterior, open-end
+DTW against the component's mean path, and against each of its training recordings), with the
+partner RMS when each is taken as T; and, to tell the precision an aim asks for, the partner RMS
+with T known but 3, 5 or 10 % off.
+
     OPENBLAS_NUM_THREADS=1 python bench/nonlinear_phase.py [--versions v1,v2]
 """
 
@@ -66,6 +73,10 @@ ETAS = (1.0, 0.5, 0.2, 0.05, 0.0)
 # The speed may change now: the phase reached from one tempered posterior, the rest of the
 # movement at the speeds of another (0: the prior's).
 SPLITS = ((1.0, 0.0), (0.2, 0.0), (1.0, 0.2))
+DURATION_ESTIMATES = ("the component's mean duration", "the package's (speed posterior)",
+                      "open-end DTW to the component's mean path",
+                      'open-end DTW to each training recording of the component (median)')
+DURATION_OFF = (0.03, 0.05, 0.1)              # T known this far off: the precision an aim needs
 HORIZONS = (0.0, 0.3, 1.0)                   # s ahead of a replan
 REPLAN_FROM, REPLAN_STEP = 0.2, 0.25         # replans from 20 % of the movement, every 0.25 s
 MAX_STEP = 4                                 # DTW: template steps a sample may move the phase on
@@ -96,6 +107,11 @@ class Observed:
         mu, _, ll = weight_posterior(observation_stats(self.model.basis_, z, y), self.mean,
                                      self.chol, self.noise)
         return mu, ll
+
+    def path(self, n):
+        """The component's mean observed path at n phases evenly from 0 to 1: (z, (n, P))."""
+        z = np.linspace(0.0, 1.0, max(2, n))
+        return z, self.model.basis_(z) @ self.mean.reshape(-1, self.model.n_basis).T
 
     def partner(self, mu, z):
         """The controlled agent's mean at phases z given the observed weights' mean mu."""
@@ -221,10 +237,7 @@ def horizons(comps, k, est, demo, config, durations):
     # the sensor's sample interval after decimation (a property of the stream, not of the future)
     dt = float(np.median(np.diff(demo.t[used])))
 
-    def template(c):
-        z = np.linspace(0.0, 1.0, max(2, int(round(2 * durations[c] / dt))))
-        return z, comps[c].model.basis_(z) @ comps[c].mean.reshape(-1, comps[c].model.n_basis).T
-    templates = [template(c) for c in range(len(comps))]
+    templates = [comps[c].path(int(round(2 * durations[c] / dt))) for c in range(len(comps))]
     whole = aligned_phases(demo.observed[used], templates[k], open_end=False)
     names = ("the package's estimator", 'T known', 'aligned on the whole recording (DTW, an '
              'oracle)', "aligned on the prefix (open-end DTW; the MAP component), ahead at the "
@@ -259,13 +272,58 @@ def horizons(comps, k, est, demo, config, durations):
             for name, e in err.items()}
 
 
+def durations_told(comps, k, est, demo, config, same, durations):
+    """How much the beginning of ``demo`` tells of its duration T, after each fraction: per
+    estimate of T, (mean |T_hat / T - 1|, partner RMS with the phase t / T_hat), the linear
+    phase conditioned on the prefix as with T known. The estimates, all causal and all of the
+    recording's own component k (so that only the timing is measured): the mean duration of
+    the component's training recordings (the prior alone); the package's (the tempered speed
+    posterior's mean 1 / alpha); t / z with z the phase the prefix reaches by open-end DTW
+    against the component's mean path; and the median over the component's training
+    recordings ``same`` of t T_i / t_i, t_i the time of recording i the prefix reaches by
+    open-end DTW against it (nearest neighbours that need no model)."""
+    rows = observed_rows(demo)
+    used = rows[decimated_rows(demo.t[rows], config.min_interval)]
+    T = demo.duration
+    dt = float(np.median(np.diff(demo.t[used])))
+    recorded = ~np.isnan(demo.controlled).any(axis=1)
+
+    mean_path = comps[k].path(int(round(2 * durations[k] / dt)))
+    neighbours = []           # each at the phases a template has (aligned_phases' step bound)
+    for d in same:
+        ok = observed_rows(d)
+        z = np.linspace(0.0, 1.0, max(2, int(round(2 * d.duration / dt))))
+        neighbours.append((z, np.stack([np.interp(z, d.t[ok] / d.duration, d.observed[ok, j])
+                                        for j in range(d.n_observed_dofs)], axis=1)))
+
+    def partner_rms(T_hat):          # of the prefix (t, y) and the rest at the present cut
+        mu = comps[k].posterior(t / T_hat, y)[0]
+        return rms(comps[k].partner(mu, demo.t[rest] / T_hat), demo.controlled[rest])
+    out = {}
+    for cut in prefixes(est, demo, np.multiply(FRACTIONS, T)):
+        sel = used[demo.t[used] <= cut + 1e-9]
+        t, y = demo.t[sel], demo.observed[sel]
+        rest = np.flatnonzero((demo.t > cut + 1e-9) & recorded)
+        m, p = est.speed_hypotheses(k)
+        told = (durations[k], float(p @ (1.0 / est.alphas[m])),
+                t[-1] / max(aligned_phases(y, mean_path, open_end=True)[-1], 1e-3),
+                float(np.median([t[-1] / max(aligned_phases(y, path, open_end=True)[-1], 1e-3)
+                                 for path in neighbours])))
+        for name, T_hat in zip(DURATION_ESTIMATES, told):
+            out.setdefault(name, []).append((abs(T_hat / T - 1.0), partner_rms(T_hat)))
+        for e in DURATION_OFF:
+            out.setdefault(f'T known, {100 * e:g} % off (either way)', []).append(
+                (e, 0.5 * (partner_rms(T * (1 + e)) + partner_rms(T * (1 - e)))))
+    return out
+
+
 def version(v, prior_sd):
     from mixture_ip_ros.scenarios import nuisi
     demos = nuisi.demonstrations(v, 'train') + nuisi.demonstrations(v, 'test')
     labels = np.array([d.label for d in demos])
     folds = stratified_folds(labels)
     config = interactions_config()
-    rows, ahead, failed = {}, {}, []
+    rows, ahead, told, failed = {}, {}, {}, []
 
     def add(name, values, to=rows):
         to.setdefault(name, []).append(values)
@@ -315,11 +373,17 @@ def version(v, prior_sd):
                  for p in prefix_predictions(est, d, FRACTIONS)])
             for name, r in horizons(observed, k, est, d, config, durations).items():
                 add(name, r, ahead)
+            same = [demos[j] for j in train_i if labels[j] == labels[i]]
+            for name, r in durations_told(observed, k, est, d, config, same, durations).items():
+                add(name, r, told)
     return {'partner_rms_cm_mean_by_fraction': {
         name: [round(100 * float(x), 1) for x in np.mean(r, axis=0)] for name, r in rows.items()},
         'partner_rms_cm_mean_by_horizon': {
         name: [round(100 * float(x), 1) for x in np.nanmean(r, axis=0)]
         for name, r in ahead.items()},
+        'duration_told_by_fraction': {      # name: [[mean |T_hat / T - 1|, partner RMS cm]]
+            name: [[round(float(e), 3), round(100 * float(x), 1)] for e, x in np.mean(r, axis=0)]
+            for name, r in told.items()},
         'warp_fits_not_converged': failed}
 
 

@@ -183,6 +183,24 @@ def phase_section(nl) -> list:
               '| method | ' + ' | '.join(f'NuiSI {v}' for v in versions) + ' |',
               '|---|' + '---|' * len(versions)]
         table('partner_rms_cm_mean_by_horizon')
+    if 'duration_told_by_fraction' in nl[versions[0]]:
+        L += ['', 'How much the beginning of a recording tells of its duration T (the linear '
+              'phase needs it to place the rest of the partner in time): after 30 / 50 / 70 %, '
+              'the mean relative error of T estimated from the prefix, causally, and in '
+              'brackets the partner RMS in cm with that T (the weights conditioned on the prefix '
+              "as with T known; the recording's own component). With T known: " +
+              ', '.join(f"{v} " + ' / '.join(
+                  f'{x:.1f}' for x in nl[v]['partner_rms_cm_mean_by_fraction']['T known, linear'])
+                  for v in versions) + ' cm.', '',
+              '| T from | ' + ' | '.join(f'NuiSI {v}' for v in versions) + ' |',
+              '|---|' + '---|' * len(versions)]
+        for name in nl[versions[0]]['duration_told_by_fraction']:
+            cells = []
+            for v in versions:
+                r = nl[v]['duration_told_by_fraction'][name]
+                cells.append(' / '.join(f'{100 * e:.1f}' for e, _ in r) + ' % (' +
+                             ' / '.join(f'{x:.1f}' for _, x in r) + ')')
+            L.append(f'| {name} | ' + ' | '.join(cells) + ' |')
     return L + ['']
 
 
