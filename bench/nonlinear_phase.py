@@ -37,8 +37,10 @@ And how much the beginning of a recording tells of its duration, which the linea
 to place the rest of the partner's movement in time: after 30 / 50 / 70 %, the error of four
 causal estimates of T (the component's mean duration, the package's speed posterior, open-end
 DTW against the component's mean path, and against each of its training recordings), with the
-partner RMS when each is taken as T; and, to tell the precision an aim asks for, the partner RMS
-with T known but 3, 5 or 10 % off.
+partner RMS when each is taken as T; whether the shape of the prefix tells T (a bound: ridge
+regression of log T on the prefix read at its own true phase, as if it were aligned perfectly,
+trained on the component's training recordings read the same way); and, to tell the precision
+an aim asks for, the partner RMS with T known but 3, 5 or 10 % off.
 
     OPENBLAS_NUM_THREADS=1 python bench/nonlinear_phase.py [--versions v1,v2]
 """
@@ -54,6 +56,9 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 import numpy as np  # noqa: E402
 from scipy import linalg, optimize  # noqa: E402
 from scipy.special import logsumexp  # noqa: E402
+from sklearn.linear_model import RidgeCV  # noqa: E402
+from sklearn.pipeline import make_pipeline  # noqa: E402
+from sklearn.preprocessing import StandardScaler  # noqa: E402
 
 from mixture_ip_ros.app.evaluation.common import trained  # noqa: E402
 from mixture_ip_ros.app.evaluation.interactions import (interactions_config,  # noqa: E402
@@ -75,7 +80,9 @@ ETAS = (1.0, 0.5, 0.2, 0.05, 0.0)
 SPLITS = ((1.0, 0.0), (0.2, 0.0), (1.0, 0.2))
 DURATION_ESTIMATES = ("the component's mean duration", "the package's (speed posterior)",
                       "open-end DTW to the component's mean path",
-                      'open-end DTW to each training recording of the component (median)')
+                      'open-end DTW to each training recording of the component (median)',
+                      "oracle: regression on the prefix's shape, read at its true phase")
+SHAPE_POINTS = 6                             # phases per DOF where the regression reads a prefix
 DURATION_OFF = (0.03, 0.05, 0.1)              # T known this far off: the precision an aim needs
 HORIZONS = (0.0, 0.3, 1.0)                   # s ahead of a replan
 REPLAN_FROM, REPLAN_STEP = 0.2, 0.25         # replans from 20 % of the movement, every 0.25 s
@@ -281,7 +288,10 @@ def durations_told(comps, k, est, demo, config, same, durations):
     posterior's mean 1 / alpha); t / z with z the phase the prefix reaches by open-end DTW
     against the component's mean path; and the median over the component's training
     recordings ``same`` of t T_i / t_i, t_i the time of recording i the prefix reaches by
-    open-end DTW against it (nearest neighbours that need no model)."""
+    open-end DTW against it (nearest neighbours that need no model). And one that is not causal,
+    a bound on what the prefix's shape tells of T: log T regressed (ridge, penalty by
+    leave-one-out) on the observed path at SHAPE_POINTS phases up to the fraction, each
+    recording read at its own true phase t / T (Fitts: a longer reach may take longer)."""
     rows = observed_rows(demo)
     used = rows[decimated_rows(demo.t[rows], config.min_interval)]
     T = demo.duration
@@ -296,11 +306,23 @@ def durations_told(comps, k, est, demo, config, same, durations):
         neighbours.append((z, np.stack([np.interp(z, d.t[ok] / d.duration, d.observed[ok, j])
                                         for j in range(d.n_observed_dofs)], axis=1)))
 
+    def shape(d, fraction):          # the observed path up to ``fraction`` at its true phase
+        ok = observed_rows(d)
+        z = np.linspace(0.0, fraction, SHAPE_POINTS)
+        return np.concatenate([np.interp(z, d.t[ok] / d.duration, d.observed[ok, j])
+                               for j in range(d.n_observed_dofs)])
+
+    def shape_duration(fraction):
+        regression = make_pipeline(StandardScaler(), RidgeCV(alphas=np.logspace(-2, 4, 25)))
+        regression.fit(np.stack([shape(d, fraction) for d in same]),
+                       np.log([d.duration for d in same]))
+        return float(np.exp(regression.predict(shape(demo, fraction)[None])[0]))
+
     def partner_rms(T_hat):          # of the prefix (t, y) and the rest at the present cut
         mu = comps[k].posterior(t / T_hat, y)[0]
         return rms(comps[k].partner(mu, demo.t[rest] / T_hat), demo.controlled[rest])
     out = {}
-    for cut in prefixes(est, demo, np.multiply(FRACTIONS, T)):
+    for fraction, cut in zip(FRACTIONS, prefixes(est, demo, np.multiply(FRACTIONS, T))):
         sel = used[demo.t[used] <= cut + 1e-9]
         t, y = demo.t[sel], demo.observed[sel]
         rest = np.flatnonzero((demo.t > cut + 1e-9) & recorded)
@@ -308,7 +330,8 @@ def durations_told(comps, k, est, demo, config, same, durations):
         told = (durations[k], float(p @ (1.0 / est.alphas[m])),
                 t[-1] / max(aligned_phases(y, mean_path, open_end=True)[-1], 1e-3),
                 float(np.median([t[-1] / max(aligned_phases(y, path, open_end=True)[-1], 1e-3)
-                                 for path in neighbours])))
+                                 for path in neighbours])),
+                shape_duration(fraction))
         for name, T_hat in zip(DURATION_ESTIMATES, told):
             out.setdefault(name, []).append((abs(T_hat / T - 1.0), partner_rms(T_hat)))
         for e in DURATION_OFF:

@@ -91,6 +91,14 @@ def pct(x):
     return '-' if x is None else f'{100 * x:.0f} %'
 
 
+def wrong_side(pole, model):
+    """'n of m': one-sided spots the ``model`` ('single' or 'mixture') takes round the wrong
+    side of the pole."""
+    one_sided = pole['n_folds'] - pole['n_two_sided_spots']
+    right = pole[f'side_accuracy_{model}']['one_sided']
+    return '-' if right is None else f'{round((1 - right) * one_sided)} of {one_sided}'
+
+
 def fractions(d, keys=('0.3', '0.5', '0.7', '1')):
     return ' / '.join('-' if d.get(k) is None else
                       (f'{100 * d[k]:.0f}' if d[k] <= 1.0001 else f'{d[k]:.1f}') for k in keys)
@@ -186,9 +194,11 @@ def phase_section(nl) -> list:
     if 'duration_told_by_fraction' in nl[versions[0]]:
         L += ['', 'How much the beginning of a recording tells of its duration T (the linear '
               'phase needs it to place the rest of the partner in time): after 30 / 50 / 70 %, '
-              'the mean relative error of T estimated from the prefix, causally, and in '
-              'brackets the partner RMS in cm with that T (the weights conditioned on the prefix '
-              "as with T known; the recording's own component). With T known: " +
+              'the mean relative error of T estimated from the prefix, causally (but for the '
+              "oracle, which reads the prefix at its true phase: what the prefix's shape could "
+              'tell if it were aligned perfectly), and in brackets the partner RMS in cm with '
+              "that T (the weights conditioned on the prefix as with T known; the recording's "
+              'own component). With T known: ' +
               ', '.join(f"{v} " + ' / '.join(
                   f'{x:.1f}' for x in nl[v]['partner_rms_cm_mean_by_fraction']['T known, linear'])
                   for v in versions) + ' cm.', '',
@@ -230,8 +240,9 @@ def page(R: dict) -> str:
               f"one Gaussian {pct(pole['pole_collision_rate_single'])}, the mixture "
               f"{pct(pole['pole_collision_rate_mixture'])}. Flange RMS on spots reachable from "
               f"one side: one Gaussian {pole['flange_rms_cm_single_one_sided']:.1f} cm, the "
-              f"mixture {pole['flange_rms_cm_mixture_one_sided']:.1f} cm (thesis: about 4 cm).",
-              '']
+              f"mixture {pole['flange_rms_cm_mixture_one_sided']:.1f} cm (thesis: about 4 cm); "
+              f"one-sided spots the mixture takes round the wrong side: "
+              f"{wrong_side(pole, 'mixture')}, one Gaussian {wrong_side(pole, 'single')}.", '']
     ph, md = R.get('evaluate_phase'), R.get('evaluate_missing_data')
     if ph and md:
         rms = ph['rms_at']
