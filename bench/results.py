@@ -426,7 +426,9 @@ def main():
     R = {}
     for name, (command, target) in todo.items():
         path = OUT / f'{name}.json'
-        if (only is not None and name not in only) or (args.reuse and path.is_file()):
+        # A job named by --only runs even when --reuse would keep its JSON.
+        kept = name not in only if only is not None else args.reuse and path.is_file()
+        if kept:
             if path.is_file():
                 R[name] = json.loads(path.read_text())
             continue
