@@ -298,19 +298,19 @@ def durations_told(comps, k, est, demo, config, same, durations):
     dt = float(np.median(np.diff(demo.t[used])))
     recorded = ~np.isnan(demo.controlled).any(axis=1)
 
+    def at_phase(d, z):              # d's observed path at its true phases z = t / T
+        ok = observed_rows(d)
+        return np.stack([np.interp(z, d.t[ok] / d.duration, d.observed[ok, j])
+                         for j in range(d.n_observed_dofs)], axis=1)
+
     mean_path = comps[k].path(int(round(2 * durations[k] / dt)))
     neighbours = []           # each at the phases a template has (aligned_phases' step bound)
     for d in same:
-        ok = observed_rows(d)
         z = np.linspace(0.0, 1.0, max(2, int(round(2 * d.duration / dt))))
-        neighbours.append((z, np.stack([np.interp(z, d.t[ok] / d.duration, d.observed[ok, j])
-                                        for j in range(d.n_observed_dofs)], axis=1)))
+        neighbours.append((z, at_phase(d, z)))
 
-    def shape(d, fraction):          # the observed path up to ``fraction`` at its true phase
-        ok = observed_rows(d)
-        z = np.linspace(0.0, fraction, SHAPE_POINTS)
-        return np.concatenate([np.interp(z, d.t[ok] / d.duration, d.observed[ok, j])
-                               for j in range(d.n_observed_dofs)])
+    def shape(d, fraction):          # the observed path up to ``fraction``, one row
+        return at_phase(d, np.linspace(0.0, fraction, SHAPE_POINTS)).ravel()
 
     def shape_duration(fraction):
         regression = make_pipeline(StandardScaler(), RidgeCV(alphas=np.logspace(-2, 4, 25)))
