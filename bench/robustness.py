@@ -7,7 +7,10 @@ stream of ``--seed``): (a) ``offset``, each recording's pair elsewhere (one offs
 people, std 30 / 15 / 20 cm per axis); (b) ``noise``, a tracker's noise on every coordinate of
 both people (2 cm, correlated over 0.1 s); (c) ``clock``, stamps jittered by 4 ms and a tenth
 of the frames dropped in bursts of 1-5; (d) ``half``, each fold trained on half its training
-recordings of every interaction. Each alone and all together. The model is trained as a user
+recordings of every interaction. Each alone and all together. And (e) ``tempo``, the people's
+pace within each recording off by about a third over about a fifth of the movement (onset and
+end kept), alone: a stress on the linear phase that a nearest neighbour aligned by DTW does not
+feel. The model is trained as a user
 who knows their recordings would train it: ``--translation shared`` (core.patterns) where the
 pair may stand anywhere, the default (``none``) otherwise; both where the comparison says what
 the option buys and costs. The nearest-neighbour baseline gets the same knowledge (derivative
@@ -44,6 +47,7 @@ CASES = {
     'all': (('offset', 'noise', 'clock'), 1.0, 'shared'),
     'all_none': (('offset', 'noise', 'clock'), 1.0, 'none'),
     'all_half': (('offset', 'noise', 'clock'), DEFAULTS.train_fraction, 'shared'),
+    'tempo': (('tempo',), 1.0, 'none'),
 }
 EXPECTED_K = {'v1': 6, 'v2': 4}
 

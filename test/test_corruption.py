@@ -10,7 +10,7 @@ import pytest
 
 from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.scenarios.corruption import (DEFAULTS, Corruption, ar1_noise, corrupted,
-                                                 noisy, reclocked, shifted)
+                                                 noisy, reclocked, retimed, shifted)
 
 
 def _pair(n=60, rate=30.0, n_obs=3, n_ctrl=3, phase=0.0, name=None):
@@ -33,7 +33,7 @@ def _unchanged(demos, copies):
 
 
 def test_the_defaults_are_the_documented_magnitudes_and_frozen():
-    assert DEFAULTS == Corruption((0.3, 0.15, 0.2), 0.02, 0.1, 0.004, 0.1, 5, 0.5)
+    assert DEFAULTS == Corruption((0.3, 0.15, 0.2), 0.02, 0.1, 0.004, 0.1, 5, 0.5, 0.3, 0.2)
     with pytest.raises(dataclasses.FrozenInstanceError):
         DEFAULTS.drop = 0.5
 
@@ -224,13 +224,54 @@ def _set(n=6):
     return [_pair(n=45 + 5 * k, phase=0.3 * k, name=f'r{k}') for k in range(n)]
 
 
+# -- retimed --------------------------------------------------------------------------------
+def test_retimed_keeps_every_sample_the_onset_and_the_end_and_moves_the_stamps_monotonically():
+    demos = [_pair(phase=k, name=f'r{k}') for k in range(4)]
+    demos[1].observed[5:9] = np.nan                      # a gap stays where it was, by sample
+    before = _copies(demos)
+    out = retimed(demos, np.random.default_rng(2))
+    assert _unchanged(demos, before)
+    for d, r in zip(demos, out):
+        assert (r.label, r.name) == (d.label, d.name)
+        assert np.array_equal(r.observed, d.observed, equal_nan=True)
+        assert np.array_equal(r.controlled, d.controlled)
+        assert r.t[0] == 0.0 and r.t[-1] == d.t[-1]
+        assert np.all(np.diff(r.t) > 0)
+        assert np.max(np.abs(r.t - d.t)) > 0.01        # stamps moved, not rounded
+    assert not np.allclose(out[0].t, out[1].t)           # one pace per recording
+
+
+def test_retimed_log_pace_has_the_given_std_and_correlation_along_the_movement():
+    """The time between samples i and i + 1 is c du exp(-r_i), so x_i = log(dt'_i / dt_i) is
+    -r_i plus a constant per recording and E[(x_i - x_{i+k})^2] = 2 std^2 (1 - rho^k),
+    rho = exp(-du / correlation). 2000 recordings of 60 regular samples (du = 1/59, rho =
+    0.919): the mean over recordings is asserted within 4 of its standard errors (estimated
+    from the recordings) at k = 1, 5 and 20; a std 10 % off or a correlation twice as long
+    moves it by 14 or more of them at every k."""
+    n, std, corr = 2000, 0.3, 0.2
+    demos = [_pair() for _ in range(n)]
+    out = retimed(demos, np.random.default_rng(9), std, corr)
+    x = np.array([np.log(np.diff(r.t) / np.diff(d.t)) for d, r in zip(demos, out)])
+    du = 1.0 / 59
+    for k in (1, 5, 20):
+        per = np.mean((x[:, :-k] - x[:, k:]) ** 2, axis=1)
+        expected = 2 * std ** 2 * (1 - np.exp(-k * du / corr))
+        se = per.std(ddof=1) / np.sqrt(n)
+        assert abs(per.mean() - expected) < 4 * se, (k, per.mean(), expected, se)
+
+
+def test_retimed_with_zero_std_returns_the_recordings_as_they_were():
+    demos = [_pair(), _pair(phase=1.0)]
+    assert _same(retimed(demos, np.random.default_rng(0), 0.0), demos)
+
+
 def _same(a, b):
     return len(a) == len(b) and all(
         np.array_equal(x.t, y.t) and np.array_equal(x.observed, y.observed)
         and np.array_equal(x.controlled, y.controlled) for x, y in zip(a, b))
 
 
-ALL = ['offset', 'noise', 'clock']
+ALL = ['offset', 'noise', 'clock', 'tempo']
 
 
 def test_corrupted_is_deterministic_per_seed_and_leaves_its_inputs():
@@ -239,7 +280,7 @@ def test_corrupted_is_deterministic_per_seed_and_leaves_its_inputs():
     a, b = corrupted(demos, ALL, seed=3), corrupted(demos, ALL, seed=3)
     assert _same(a, b) and not _same(a, corrupted(demos, ALL, seed=4))
     assert _unchanged(demos, before)
-    for which in (['offset'], ['noise'], ['clock']):
+    for which in (['offset'], ['noise'], ['clock'], ['tempo']):
         assert not _same(corrupted(demos, which, 0), corrupted(demos, which, 1))
 
 
@@ -267,12 +308,20 @@ def test_corrupted_offsets_are_those_of_shifted_on_its_own_stream_whatever_else_
         assert np.allclose(b.controlled - n.controlled, a.controlled - d.controlled, atol=1e-12)
 
 
-def test_corrupted_reclocks_first_then_adds_noise_over_the_new_stamps_then_moves_the_pair():
+def test_corrupted_retimes_first_then_reclocks_then_adds_noise_then_moves_the_pair():
+    """The people's pace is theirs (stream 3 of SeedSequence(seed).spawn(4)); the tracker's
+    clock, noise and the pair's place follow on streams 2, 1 and 0, as before the pace was
+    added (spawned streams do not depend on how many are spawned)."""
     demos, seed = _set(), 5
-    streams = np.random.SeedSequence(seed).spawn(3)
+    streams = np.random.SeedSequence(seed).spawn(4)
+    tempo = retimed(demos, np.random.default_rng(streams[3]), DEFAULTS.tempo_std,
+                    DEFAULTS.tempo_time)
+    assert _same(corrupted(demos, ['tempo'], seed), tempo)
     clock = reclocked(demos, np.random.default_rng(streams[2]), DEFAULTS.jitter_std,
                       DEFAULTS.drop, DEFAULTS.burst)
     assert _same(corrupted(demos, ['clock'], seed), clock)
+    clock = reclocked(tempo, np.random.default_rng(streams[2]), DEFAULTS.jitter_std,
+                      DEFAULTS.drop, DEFAULTS.burst)
     noise = noisy(clock, np.random.default_rng(streams[1]), DEFAULTS.noise_std,
                   DEFAULTS.noise_time)
     expected = shifted(noise, np.random.default_rng(streams[0]), DEFAULTS.offset_std)
@@ -281,6 +330,7 @@ def test_corrupted_reclocks_first_then_adds_noise_over_the_new_stamps_then_moves
 
 def test_corrupted_uses_the_given_magnitudes():
     demos = _set(3)
-    none = Corruption(offset_std=(0.0, 0.0, 0.0), noise_std=0.0, jitter_std=0.0, drop=0.0)
+    none = Corruption(offset_std=(0.0, 0.0, 0.0), noise_std=0.0, jitter_std=0.0, drop=0.0,
+                      tempo_std=0.0)
     assert _same(corrupted(demos, ALL, 0, none), demos)
     assert _same(corrupted(demos, [], 0), demos)

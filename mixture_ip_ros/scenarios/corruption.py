@@ -1,5 +1,6 @@
 """Recordings as another lab would make them: the same interactions, the pair standing elsewhere
-in the room, a skeleton tracker's noise, a tracker's clock, fewer recordings. Each corruption is
+in the room, a skeleton tracker's noise, a tracker's clock, fewer recordings, people who keep
+their pace less steadily. Each corruption is
 seeded and takes Demonstrations to new Demonstrations (the inputs are not changed), so that a
 robustness evaluation (bench/robustness.py) can run every method on the same corrupted data.
 
@@ -7,7 +8,10 @@ The magnitudes are stated where they are set (:data:`DEFAULTS`) and are those of
 skeleton trackers, not of any one data set: where a pair stands differs by tens of cm between
 sessions (the observed hand's start in another lab's Kinect recordings of NuiSI's interactions:
 std 37 / 13 / 19 cm per axis), a skeleton tracker's joints wander by 1-3 cm over a tenth of a
-second, and a 30 Hz tracker's stamps jitter by milliseconds and drop frames.
+second, and a 30 Hz tracker's stamps jitter by milliseconds and drop frames. The pace is not a
+tracker's: people hold, hesitate and speed up within one movement; its magnitude (the pace off
+by about a third, over about a fifth of the movement) is a stress on the linear phase z = t / T,
+not a measurement of any data set.
 """
 
 from dataclasses import dataclass
@@ -24,7 +28,9 @@ class Corruption:
     ``noise_time``: stationary std and correlation time of a first-order autoregressive
     tracker noise, independent per DOF and agent; ``jitter_std``: std of each stamp around the
     tracker's nominal period; ``drop``: share of frames lost, in bursts of 1 to ``burst``
-    frames; ``train_fraction``: share of each fold's training recordings kept (per label)."""
+    frames; ``train_fraction``: share of each fold's training recordings kept (per label);
+    ``tempo_std`` and ``tempo_time``: std of the log pace within a movement and its correlation
+    length as a share of the movement (:func:`retimed`)."""
 
     offset_std: tuple = (0.3, 0.15, 0.2)
     noise_std: float = 0.02
@@ -33,6 +39,8 @@ class Corruption:
     drop: float = 0.1
     burst: int = 5
     train_fraction: float = 0.5
+    tempo_std: float = 0.3
+    tempo_time: float = 0.2
 
 
 DEFAULTS = Corruption()
@@ -100,16 +108,47 @@ def reclocked(demos, rng, jitter_std=DEFAULTS.jitter_std, drop=DEFAULTS.drop,
     return out
 
 
+def retimed(demos, rng, std=DEFAULTS.tempo_std, correlation=DEFAULTS.tempo_time) -> list:
+    """People's pace within a movement: every sample of a recording keeps its values (both
+    people's: they hold or hurry together) and gets a new stamp, so that the onset and the end,
+    and with them the duration T, stay where they were. Between samples i and i + 1 the time
+    taken is c (u[i+1] - u[i]) exp(-r[i]), u = t / T the movement's progress and c the constant
+    that keeps T; the log pace r is :func:`ar1_noise` over u (std ``std``, correlation
+    exp(-du / ``correlation``)). A linear phase z = t / T then misplaces every sample. With
+    ``std`` 0 every recording is returned as it was (its stamps not even rounded)."""
+    out = []
+    for d in demos:
+        if std == 0:
+            out.append(Demonstration(d.t.copy(), d.observed.copy(), d.controlled.copy(), d.label,
+                                     d.name))
+            continue
+        T = d.t[-1]
+        u = d.t / T
+        r = ar1_noise(u[:-1], 1, rng, std, correlation)[:, 0]
+        step = np.diff(u) * np.exp(-r)
+        t = np.concatenate([[0.0], np.cumsum(step)]) * (T / step.sum())
+        t[-1] = T
+        out.append(Demonstration(t, d.observed.copy(), d.controlled.copy(), d.label, d.name))
+    return out
+
+
+KNOWN = ('offset', 'noise', 'clock', 'tempo')
+
+
 def corrupted(demos, which, seed: int = 0, magnitudes: Corruption = DEFAULTS) -> list:
-    """``demos`` with the corruptions named in ``which`` ('offset', 'noise', 'clock'), each from
-    its own stream of ``seed`` (the streams in that order, so that one corruption's draws do not
-    depend on which others are asked for); applied as a tracker would add them: the clock first
-    changes the stamps, then the noise runs over them, then the pair is moved."""
-    unknown = set(which) - {'offset', 'noise', 'clock'}
+    """``demos`` with the corruptions named in ``which`` (of :data:`KNOWN`), each from its own
+    stream of ``seed`` (the streams in that order, so that one corruption's draws do not depend
+    on which others are asked for); applied in the order they happen: the people's pace first,
+    then the tracker's clock changes the stamps, its noise runs over them, then the pair is
+    moved."""
+    unknown = set(which) - set(KNOWN)
     if unknown:
-        raise ValueError(f'unknown corruptions {sorted(unknown)}; known: offset, noise, clock')
-    streams = np.random.SeedSequence(seed).spawn(3)
+        raise ValueError(f'unknown corruptions {sorted(unknown)}; known: {", ".join(KNOWN)}')
+    streams = np.random.SeedSequence(seed).spawn(len(KNOWN))
     out = list(demos)
+    if 'tempo' in which:
+        out = retimed(out, np.random.default_rng(streams[3]), magnitudes.tempo_std,
+                      magnitudes.tempo_time)
     if 'clock' in which:
         out = reclocked(out, np.random.default_rng(streams[2]), magnitudes.jitter_std,
                         magnitudes.drop, magnitudes.burst)
