@@ -112,3 +112,28 @@ def test_ctrl_c_while_starting_and_running_exits_cleanly(executable, model):
             proc.kill()
             pytest.fail(f'{executable} did not stop on Ctrl-C {moment}')
         assert proc.returncode == 0 and 'Traceback' not in out, (moment, out)
+
+
+def test_ctrl_c_in_the_middle_of_start_up_takes_effect_once_it_is_complete():
+    """SIGINT while the node activates (its subscriptions half made): activation completes, the
+    node is not spun, it is destroyed cleanly and the exit code is 0. An interrupt raised where
+    it arrived could cut rclpy's create_subscription in half and make destroy_node raise."""
+    code = ('import os, signal\n'
+            'from mixture_ip_ros.nodes.managed import run_node\n'
+            'from mixture_ip_ros.nodes.observer_node import ObserverNode\n'
+            'events = []\n'
+            'class Interrupted(ObserverNode):\n'
+            '    def activate(self):\n'
+            '        os.kill(os.getpid(), signal.SIGINT)\n'
+            '        super().activate()\n'
+            "        events.append('activated')\n"
+            '    def destroy_node(self):\n'
+            "        events.append('destroyed')\n"
+            '        return super().destroy_node()\n'
+            "code = run_node(Interrupted, done=lambda node: events.append('spun'))\n"
+            "print('exit', code, events)\n")
+    proc = subprocess.run([sys.executable, '-c', code], env=_env(), capture_output=True,
+                          text=True, timeout=120)
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == 0 and 'Traceback' not in out, out
+    assert "exit 0 ['activated', 'destroyed']" in proc.stdout, out

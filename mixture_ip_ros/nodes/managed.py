@@ -127,26 +127,26 @@ class ManagedNode(LifecycleNode):
 
 
 class _Interrupts:
-    """SIGINT and SIGTERM for a node executable: while it starts, a KeyboardInterrupt (start-up
-    is abandoned); once it spins, a request the spin loop sees after the callback in progress.
-    rclpy's own handler is not used: it shuts the context down from another thread, at any
-    point of a callback, and was seen to leave a node spinning on (SIGINT ignored at start, as
-    for a shell's background job) or to crash it while it published."""
+    """SIGINT and SIGTERM for a node executable: a request, seen by :func:`run_node` once
+    start-up is complete and by the spin loop after the callback in progress. Never an
+    exception raised wherever the process happens to be: one raised inside rclpy's
+    create_subscription (the subscription registered, its event handlers not yet) leaves a node
+    whose destroy_node raises. Nor is rclpy's own handler used: it shuts the context down from another thread, at any point of a
+    callback, and was seen to leave a node spinning on (SIGINT ignored at start, as for a
+    shell's background job) or to crash it while it published."""
 
     def __init__(self):
         self.requested = False
-        self.spinning = False
 
     def __call__(self, signum, frame):
         self.requested = True
-        if not self.spinning:
-            raise KeyboardInterrupt
 
 
 def run_node(node_class, args=None, done=None) -> int:
     """The ``main`` of every executable: start the node (and its lifecycle, for a managed node
     with ``autostart``), spin until Ctrl-C, SIGTERM, an external shutdown or ``done(node)``,
-    and exit 0. A node that cannot start (bad parameter, missing or invalid file) logs one line
+    and exit 0 (Ctrl-C while it starts: once start-up is complete, without spinning). A node
+    that cannot start (bad parameter, missing or invalid file) logs one line
     and exits 1, without a traceback."""
     name = getattr(node_class, 'NODE_NAME', node_class.__name__)
     interrupts = _Interrupts()
@@ -158,18 +158,14 @@ def run_node(node_class, args=None, done=None) -> int:
         if isinstance(node, ManagedNode) and not node.start():
             get_logger(name).fatal(f'refusing to start: {node.refusal}')
             return 1
-        interrupts.spinning = True
         if not interrupts.requested:
             spin_until_shutdown(node, lambda: interrupts.requested or (
                 done is not None and done(node)))
-        return 0
-    except KeyboardInterrupt:
         return 0
     except (ValueError, ParameterException) as exc:
         get_logger(name).fatal(f'refusing to start: {exc}')
         return 1
     finally:
-        interrupts.spinning = False
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
