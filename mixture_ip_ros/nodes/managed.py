@@ -131,9 +131,10 @@ class _Interrupts:
     start-up is complete and by the spin loop after the callback in progress. Never an
     exception raised wherever the process happens to be: one raised inside rclpy's
     create_subscription (the subscription registered, its event handlers not yet) leaves a node
-    whose destroy_node raises. Nor is rclpy's own handler used: it shuts the context down from another thread, at any point of a
-    callback, and was seen to leave a node spinning on (SIGINT ignored at start, as for a
-    shell's background job) or to crash it while it published."""
+    whose destroy_node raises. Nor is rclpy's own handler used: it shuts the context down from
+    another thread, at any point of a callback, and was seen to leave a node spinning on
+    (SIGINT ignored at start, as for a shell's background job) or to crash it while it
+    published."""
 
     def __init__(self):
         self.requested = False
@@ -146,8 +147,8 @@ def run_node(node_class, args=None, done=None) -> int:
     """The ``main`` of every executable: start the node (and its lifecycle, for a managed node
     with ``autostart``), spin until Ctrl-C, SIGTERM, an external shutdown or ``done(node)``,
     and exit 0 (Ctrl-C while it starts: once start-up is complete, without spinning). A node
-    that cannot start (bad parameter, missing or invalid file) logs one line
-    and exits 1, without a traceback."""
+    that cannot start (bad parameter, missing or invalid file) logs one line and exits 1,
+    without a traceback."""
     name = getattr(node_class, 'NODE_NAME', node_class.__name__)
     interrupts = _Interrupts()
     previous = {sig: signal.signal(sig, interrupts) for sig in (signal.SIGINT, signal.SIGTERM)}
