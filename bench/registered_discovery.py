@@ -16,7 +16,7 @@ every recording registered again from its original stamps, ``--iterations`` time
 K and the ARI after each round, and the mean |b|.
 
     OPENBLAS_NUM_THREADS=1 python bench/registered_discovery.py [--versions v1,v2]
-        [--iterations 3] [--prior-sd 0.3]
+        [--iterations 3] [--prior-sd 0.3] [--learn-prior]
 """
 
 import argparse
@@ -45,6 +45,7 @@ from mixture_ip_ros.scenarios.corruption import corrupted  # noqa: E402
 
 CASES = {'clean': (), 'tempo': ('tempo',)}
 TEMPLATES = ('component', 'common')
+LEARN_STEPS, SD_FLOOR = 3, 0.05
 
 
 def templates(model):
@@ -55,9 +56,9 @@ def templates(model):
              nv if nv.ndim == 1 else nv[k]) for k in range(model.n_components)]
 
 
-def map_warp(basis, template, demo, prior_sd):
-    """The MAP b of ``demo`` under ``template``; the linear phase (b = 0) where the optimiser
-    does not converge."""
+def map_warp(basis, template, demo, prior):
+    """The MAP b of ``demo`` under ``template`` and the Gaussian ``prior`` (mean, sd per
+    parameter) over b; the prior's mean where the optimiser does not converge."""
     Y = np.hstack([demo.observed, demo.controlled])
     ok = ~np.isnan(Y).any(axis=1)
     u, Y = demo.phase[ok], Y[ok]
@@ -65,9 +66,10 @@ def map_warp(basis, template, demo, prior_sd):
 
     def cost(b):
         stats = observation_stats(basis, warp(u, b), Y)
-        return -(weight_posterior(stats, mean, chol, noise)[2] - 0.5 * b @ b / prior_sd ** 2)
-    res = optimize.minimize(cost, np.zeros(N_WARP), method='L-BFGS-B')
-    return res.x if res.success and np.isfinite(res.fun) else np.zeros(N_WARP)
+        return -(weight_posterior(stats, mean, chol, noise)[2]
+                 - 0.5 * np.sum(((b - prior[0]) / prior[1]) ** 2))
+    res = optimize.minimize(cost, prior[0], method='L-BFGS-B')
+    return res.x if res.success and np.isfinite(res.fun) else prior[0]
 
 
 def registered(demo, b):
@@ -76,7 +78,20 @@ def registered(demo, b):
     return Demonstration(t, demo.observed, demo.controlled, demo.label, demo.name)
 
 
-def rounds(version, case, template, iterations, prior_sd) -> dict:
+def warps(basis, temps, comp, data, prior_sd, learn):
+    """Every recording's MAP b under its template. With ``learn``, the Gaussian over b of each
+    template's recordings is learned too (eq. 34: EM, ``LEARN_STEPS`` steps from N(0, sd^2 I),
+    its sd kept above ``SD_FLOOR``)."""
+    priors = {c: (np.zeros(N_WARP), np.full(N_WARP, prior_sd)) for c in set(comp)}
+    for _ in range(LEARN_STEPS if learn else 1):
+        b = np.array([map_warp(basis, temps[c], d, priors[c]) for c, d in zip(comp, data)])
+        for c in priors:
+            mine = b[np.equal(comp, c)]
+            priors[c] = (mine.mean(axis=0), np.sqrt(mine.var(axis=0) + SD_FLOOR ** 2))
+    return b
+
+
+def rounds(version, case, template, iterations, prior_sd, learn) -> dict:
     demos = nuisi.demonstrations(version, 'train') + nuisi.demonstrations(version, 'test')
     data = corrupted(demos, CASES[case], seed=0)
     labels = [d.label for d in data]
@@ -93,9 +108,7 @@ def rounds(version, case, template, iterations, prior_sd) -> dict:
         if template == 'common':
             model, _ = trained(current, config, n_jobs=1, n_components=1)
             comp = np.zeros(len(data), dtype=int)
-        temps = templates(model)
-        b = np.array([map_warp(model.basis_, temps[c], d, prior_sd)
-                      for c, d in zip(comp, data)])
+        b = warps(model.basis_, templates(model), comp, data, prior_sd, learn)
         out['mean_abs_b'].append(round(float(np.linalg.norm(b, axis=1).mean()), 3))
         current = [registered(d, bi) for d, bi in zip(data, b)]
     return out
@@ -106,12 +119,15 @@ def main():
     ap.add_argument('--versions', default='v1,v2')
     ap.add_argument('--iterations', type=int, default=3)
     ap.add_argument('--prior-sd', type=float, default=0.3)
+    ap.add_argument('--learn-prior', action='store_true',
+                    help="learn each template's Gaussian over b, starting from --prior-sd")
     args = ap.parse_args()
     t0 = time.perf_counter()
     runs = [(v, c, m) for v in args.versions.split(',') for c in CASES for m in TEMPLATES]
-    results = _run([partial(rounds, v, c, m, args.iterations, args.prior_sd)
+    results = _run([partial(rounds, v, c, m, args.iterations, args.prior_sd, args.learn_prior)
                     for v, c, m in runs])
-    out = {'prior_sd': args.prior_sd, 'iterations': args.iterations}
+    out = {'prior_sd': args.prior_sd, 'learn_prior': args.learn_prior,
+           'iterations': args.iterations}
     for (v, c, m), r in zip(runs, results):
         out.setdefault(v, {}).setdefault(c, {})[m] = r
     out['runtime_s'] = round(time.perf_counter() - t0, 1)
