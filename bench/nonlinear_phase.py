@@ -97,6 +97,13 @@ def warp(u, b):
     return np.where((u >= 0) & (u <= 1), np.interp(u, GRID, cum / cum[-1]), u)
 
 
+def registration(demo, b):
+    """``demo`` at its warped phase: each sample restamped to T g(t / T; b) (onset and end kept,
+    g(0) = 0 and g(1) = 1 exactly)."""
+    return Demonstration(demo.duration * warp(demo.phase, b), demo.observed, demo.controlled,
+                         demo.label, demo.name)
+
+
 class Observed:
     """Component k's prior over the observed agent's weights and its noise at a sample spacing."""
 
@@ -363,8 +370,7 @@ def version(v, prior_sd):
         failed += [d.name for d, (_, good) in zip(train, fits) if not good]
         b = np.array([x for x, _ in fits])
         means = np.array([b[np.equal(comp_of, k)].mean(axis=0) for k in range(len(names))])
-        registered = [Demonstration(d.duration * warp(d.phase, bi), d.observed, d.controlled,
-                                    d.label, d.name) for d, bi in zip(train, b)]
+        registered = [registration(d, bi) for d, bi in zip(train, b)]
         reg_model, _ = trained(registered, config, n_jobs=1, labels=labels[train_i])
         linear = np.zeros((len(names), N_WARP))
         durations = [np.mean([d.duration for d, c in zip(train, comp_of) if c == k])

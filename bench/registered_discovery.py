@@ -33,11 +33,10 @@ from scipy import linalg, optimize  # noqa: E402
 from sklearn.metrics import adjusted_rand_score  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from nonlinear_phase import N_WARP, warp  # noqa: E402
+from nonlinear_phase import N_WARP, registration, warp  # noqa: E402
 
 from mixture_ip_ros.app.evaluation.common import trained  # noqa: E402
 from mixture_ip_ros.app.evaluation.interactions import _run, interactions_config  # noqa: E402
-from mixture_ip_ros.core.demonstration import Demonstration  # noqa: E402
 from mixture_ip_ros.core.noise import noise_factor  # noqa: E402
 from mixture_ip_ros.core.promp import observation_stats, weight_posterior  # noqa: E402
 from mixture_ip_ros.scenarios import nuisi  # noqa: E402
@@ -72,12 +71,6 @@ def map_warp(basis, template, demo, prior):
     return res.x if res.success and np.isfinite(res.fun) else prior[0]
 
 
-def registered(demo, b):
-    t = demo.duration * warp(demo.phase, b)
-    t[0], t[-1] = 0.0, demo.duration
-    return Demonstration(t, demo.observed, demo.controlled, demo.label, demo.name)
-
-
 def warps(basis, temps, comp, data, prior_sd, learn):
     """Every recording's MAP b under its template. With ``learn``, the Gaussian over b of each
     template's recordings is learned too (eq. 34: EM, ``LEARN_STEPS`` steps from N(0, sd^2 I),
@@ -110,7 +103,7 @@ def rounds(version, case, template, iterations, prior_sd, learn) -> dict:
             comp = np.zeros(len(data), dtype=int)
         b = warps(model.basis_, templates(model), comp, data, prior_sd, learn)
         out['mean_abs_b'].append(round(float(np.linalg.norm(b, axis=1).mean()), 3))
-        current = [registered(d, bi) for d, bi in zip(data, b)]
+        current = [registration(d, bi) for d, bi in zip(data, b)]
     return out
 
 
