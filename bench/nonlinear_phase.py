@@ -54,7 +54,7 @@ import time
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 import numpy as np  # noqa: E402
-from scipy import linalg, optimize  # noqa: E402
+from scipy import linalg  # noqa: E402
 from scipy.special import logsumexp  # noqa: E402
 from sklearn.linear_model import RidgeCV  # noqa: E402
 from sklearn.pipeline import make_pipeline  # noqa: E402
@@ -63,17 +63,13 @@ from sklearn.preprocessing import StandardScaler  # noqa: E402
 from mixture_ip_ros.app.evaluation.common import trained  # noqa: E402
 from mixture_ip_ros.app.evaluation.interactions import (interactions_config,  # noqa: E402
                                                         stratified_folds)
-from mixture_ip_ros.core.demonstration import Demonstration  # noqa: E402
 from mixture_ip_ros.core.online import (OnlineEstimator, decimated_rows,  # noqa: E402
                                         observed_rows, prefix_predictions, prefixes, supported)
 from mixture_ip_ros.core.phase import tempered_speed_posterior  # noqa: E402
 from mixture_ip_ros.core.promp import observation_stats, weight_posterior  # noqa: E402
+from mixture_ip_ros.core.warp import N_WARP, map_warp, registered, warp  # noqa: E402
 
 FRACTIONS = (0.3, 0.5, 0.7)
-N_WARP = 5                                   # bumps of the log phase rate
-CENTERS = np.linspace(0.0, 1.0, N_WARP)
-WIDTH = 1.0 / (N_WARP - 1)
-GRID = np.linspace(0.0, 1.0, 513)            # where g is integrated (trapezoids)
 ETAS = (1.0, 0.5, 0.2, 0.05, 0.0)
 # The speed may change now: the phase reached from one tempered posterior, the rest of the
 # movement at the speeds of another (0: the prior's).
@@ -87,21 +83,6 @@ DURATION_OFF = (0.03, 0.05, 0.1)              # T known this far off: the precis
 HORIZONS = (0.0, 0.3, 1.0)                   # s ahead of a replan
 REPLAN_FROM, REPLAN_STEP = 0.2, 0.25         # replans from 20 % of the movement, every 0.25 s
 MAX_STEP = 4                                 # DTW: template steps a sample may move the phase on
-
-
-def warp(u, b):
-    """z = g(u; b) on [0, 1]; u outside [0, 1] is kept (before the onset, after the end)."""
-    rate = np.exp(np.exp(-0.5 * ((GRID[:, None] - CENTERS) / WIDTH) ** 2) @ b)
-    cum = np.r_[0.0, np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(GRID))]
-    u = np.asarray(u, dtype=float)
-    return np.where((u >= 0) & (u <= 1), np.interp(u, GRID, cum / cum[-1]), u)
-
-
-def registration(demo, b):
-    """``demo`` at its warped phase: each sample restamped to T g(t / T; b) (onset and end kept,
-    g(0) = 0 and g(1) = 1 exactly)."""
-    return Demonstration(demo.duration * warp(demo.phase, b), demo.observed, demo.controlled,
-                         demo.label, demo.name)
 
 
 class Observed:
@@ -135,16 +116,11 @@ class Observed:
 
 
 def fit_warp(comp, demo, prior_sd):
-    """The MAP b of ``demo``'s observed path under ``comp``, and whether the optimiser converged
-    (a recording whose fit does not converge keeps the linear phase)."""
+    """The MAP b of ``demo``'s observed path under ``comp`` and N(0, prior_sd^2 I), and whether
+    the optimiser converged (a recording whose fit does not converge keeps the linear phase)."""
     ok = ~np.isnan(demo.observed).any(axis=1)
     u, y = demo.phase[ok], demo.observed[ok]
-
-    def cost(b):
-        return -(comp.posterior(warp(u, b), y)[1] - 0.5 * b @ b / prior_sd ** 2)
-    res = optimize.minimize(cost, np.zeros(N_WARP), method='L-BFGS-B')
-    good = bool(res.success and np.isfinite(res.fun))
-    return (res.x if good else np.zeros(N_WARP)), good
+    return map_warp(lambda b: comp.posterior(warp(u, b), y)[1], np.zeros(N_WARP), prior_sd)
 
 
 def rms(pred, truth):
@@ -370,7 +346,7 @@ def version(v, prior_sd):
         failed += [d.name for d, (_, good) in zip(train, fits) if not good]
         b = np.array([x for x, _ in fits])
         means = np.array([b[np.equal(comp_of, k)].mean(axis=0) for k in range(len(names))])
-        registered = [registration(d, bi) for d, bi in zip(train, b)]
+        registered = [registered(d, bi) for d, bi in zip(train, b)]
         reg_model, _ = trained(registered, config, n_jobs=1, labels=labels[train_i])
         linear = np.zeros((len(names), N_WARP))
         durations = [np.mean([d.duration for d, c in zip(train, comp_of) if c == k])

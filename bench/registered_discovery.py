@@ -6,44 +6,46 @@ robustness bench's ``tempo``: scenarios.corruption.retimed, log pace std 0.3 cor
 fifth of the movement, onset and end kept), training's discovery (K chosen as `mixture-ip
 train` chooses it) and the adjusted Rand index of its partition against the interactions.
 Then the same discovery on the recordings registered in time: each recording's phase
-z = g(t / T; b) a monotone warp (bench/nonlinear_phase.py's family, b = 0 the linear phase),
+z = g(t / T; b) a monotone warp (core.warp's family, b = 0 the linear phase),
 b its MAP under a template, log p(both people's paths | template, b) - |b|^2 / (2 sd^2) (the
 weights marginalised: eq. 21 with the noise of samples at the recording's rate), the thesis's
 eq. 34 with a fixed Gaussian over b. Two templates: each recording's discovered component
 (``component``), or one component for all (``common``: the K = 1 model, the registration of
 functional data analysis); the template is learned again from the registered recordings and
 every recording registered again from its original stamps, ``--iterations`` times. Each line:
-K and the ARI after each round, and the mean |b|.
+K and the ARI after each round, and the mean |b|. And the warp inside the mixture's EM
+(``em``): K kept from the discovery, every recording's warp fitted under every component, the
+recording given to the component that explains it best with its warp (so that registration
+may move it to another one), the mixture refitted from there; then K chosen again.
+``--learn-prior`` learns each template's Gaussian over b (eq. 34's prior, per component).
 
     OPENBLAS_NUM_THREADS=1 python bench/registered_discovery.py [--versions v1,v2]
-        [--iterations 3] [--prior-sd 0.3] [--learn-prior]
+        [--iterations 3] [--prior-sd 0.3] [--learn-prior] [--templates component,common,em]
 """
 
 import argparse
 from functools import partial
 import json
 import os
-import sys
 import time
 
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 import numpy as np  # noqa: E402
-from scipy import linalg, optimize  # noqa: E402
+from scipy import linalg  # noqa: E402
 from sklearn.metrics import adjusted_rand_score  # noqa: E402
-
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from nonlinear_phase import N_WARP, registration, warp  # noqa: E402
 
 from mixture_ip_ros.app.evaluation.common import trained  # noqa: E402
 from mixture_ip_ros.app.evaluation.interactions import _run, interactions_config  # noqa: E402
+from mixture_ip_ros.core.mixture import MixtureIProMP  # noqa: E402
 from mixture_ip_ros.core.noise import noise_factor  # noqa: E402
 from mixture_ip_ros.core.promp import observation_stats, weight_posterior  # noqa: E402
+from mixture_ip_ros.core.warp import N_WARP, map_warp, registered, warp, warp_prior  # noqa: E402
 from mixture_ip_ros.scenarios import nuisi  # noqa: E402
 from mixture_ip_ros.scenarios.corruption import corrupted  # noqa: E402
 
 CASES = {'clean': (), 'tempo': ('tempo',)}
-TEMPLATES = ('component', 'common')
+TEMPLATES = ('component', 'common', 'em')
 LEARN_STEPS, SD_FLOOR = 3, 0.05
 
 
@@ -55,20 +57,15 @@ def templates(model):
              nv if nv.ndim == 1 else nv[k]) for k in range(model.n_components)]
 
 
-def map_warp(basis, template, demo, prior):
-    """The MAP b of ``demo`` under ``template`` and the Gaussian ``prior`` (mean, sd per
-    parameter) over b; the prior's mean where the optimiser does not converge."""
+def evidence(basis, template, demo):
+    """log p(both people's paths | template, b) as a function of the warp b (eq. 21, the
+    weights marginalised)."""
     Y = np.hstack([demo.observed, demo.controlled])
     ok = ~np.isnan(Y).any(axis=1)
     u, Y = demo.phase[ok], Y[ok]
     mean, chol, noise = template
-
-    def cost(b):
-        stats = observation_stats(basis, warp(u, b), Y)
-        return -(weight_posterior(stats, mean, chol, noise)[2]
-                 - 0.5 * np.sum(((b - prior[0]) / prior[1]) ** 2))
-    res = optimize.minimize(cost, prior[0], method='L-BFGS-B')
-    return res.x if res.success and np.isfinite(res.fun) else prior[0]
+    return lambda b: weight_posterior(observation_stats(basis, warp(u, b), Y), mean, chol,
+                                      noise)[2]
 
 
 def warps(basis, temps, comp, data, prior_sd, learn):
@@ -77,10 +74,9 @@ def warps(basis, temps, comp, data, prior_sd, learn):
     its sd kept above ``SD_FLOOR``)."""
     priors = {c: (np.zeros(N_WARP), np.full(N_WARP, prior_sd)) for c in set(comp)}
     for _ in range(LEARN_STEPS if learn else 1):
-        b = np.array([map_warp(basis, temps[c], d, priors[c]) for c, d in zip(comp, data)])
-        for c in priors:
-            mine = b[np.equal(comp, c)]
-            priors[c] = (mine.mean(axis=0), np.sqrt(mine.var(axis=0) + SD_FLOOR ** 2))
+        b = np.array([map_warp(evidence(basis, temps[c], d), *priors[c])[0]
+                      for c, d in zip(comp, data)])
+        priors = {c: warp_prior(b[np.equal(comp, c)], sd_floor=SD_FLOOR) for c in priors}
     return b
 
 
@@ -103,7 +99,54 @@ def rounds(version, case, template, iterations, prior_sd, learn) -> dict:
             comp = np.zeros(len(data), dtype=int)
         b = warps(model.basis_, templates(model), comp, data, prior_sd, learn)
         out['mean_abs_b'].append(round(float(np.linalg.norm(b, axis=1).mean()), 3))
-        current = [registration(d, bi) for d, bi in zip(data, b)]
+        current = [registered(d, bi) for d, bi in zip(data, b)]
+    return out
+
+
+def em_rounds(version, case, iterations, prior_sd, learn) -> dict:
+    """The warp inside the mixture's EM (eq. 34 with a Gaussian over b per component): from the
+    discovered model, each round gives every recording its MAP warp under every component and
+    its plug-in score there, log pi_k + log p(D | k, b_ik) + log N(b_ik; m_k, s_k^2), assigns
+    it to the best, refits the mixture (same K, EM started from those assignments) on the
+    recordings registered by their own component's warp and, with ``learn``, each component's
+    Gaussian over b from its members' warps. Last, K chosen again on the last registration."""
+    demos = nuisi.demonstrations(version, 'train') + nuisi.demonstrations(version, 'test')
+    data = corrupted(demos, CASES[case], seed=0)
+    labels = [d.label for d in data]
+    config = interactions_config()
+    model, _ = trained(data, config, n_jobs=1)
+    K = model.n_components
+    params = {**config.model, 'prior_scale': model.prior_scale,
+              'speed_weight': model.speed_weight}
+    comp = np.argmax(model.resp_, axis=1)
+    priors = [(np.zeros(N_WARP), np.full(N_WARP, prior_sd))] * K
+    out = {'k': int(K), 'ari': [round(float(adjusted_rand_score(labels, comp)), 3)],
+           'switched': []}
+    for _ in range(iterations):
+        temps = templates(model)
+        score, b = np.empty((len(data), K)), np.empty((len(data), K, N_WARP))
+        for i, d in enumerate(data):
+            for k in range(K):
+                ev = evidence(model.basis_, temps[k], d)
+                b[i, k] = map_warp(ev, *priors[k])[0]
+                m, sd = priors[k]
+                score[i, k] = (np.log(model.weights_[k]) + ev(b[i, k])
+                               - 0.5 * np.sum(((b[i, k] - m) / sd) ** 2) - np.sum(np.log(sd)))
+        new = np.argmax(score, axis=1)
+        out['switched'].append(int(np.sum(new != comp)))
+        comp = new
+        own = b[np.arange(len(data)), comp]
+        if learn:
+            priors = [warp_prior(own[comp == k], sd_floor=SD_FLOOR) if np.any(comp == k)
+                      else priors[k] for k in range(K)]
+        current = [registered(d, bi) for d, bi in zip(data, own)]
+        model = MixtureIProMP(n_components=K, **params).fit(current, init=comp)
+        comp = np.argmax(model.resp_, axis=1)
+        out['ari'].append(round(float(adjusted_rand_score(labels, comp)), 3))
+    again, _ = trained(current, config, n_jobs=1)
+    out['k_chosen_again'] = int(again.n_components)
+    out['ari_chosen_again'] = round(float(adjusted_rand_score(
+        labels, np.argmax(again.resp_, axis=1))), 3)
     return out
 
 
@@ -114,10 +157,14 @@ def main():
     ap.add_argument('--prior-sd', type=float, default=0.3)
     ap.add_argument('--learn-prior', action='store_true',
                     help="learn each template's Gaussian over b, starting from --prior-sd")
+    ap.add_argument('--templates', default=','.join(TEMPLATES))
     args = ap.parse_args()
     t0 = time.perf_counter()
-    runs = [(v, c, m) for v in args.versions.split(',') for c in CASES for m in TEMPLATES]
-    results = _run([partial(rounds, v, c, m, args.iterations, args.prior_sd, args.learn_prior)
+    runs = [(v, c, m) for v in args.versions.split(',') for c in CASES
+            for m in args.templates.split(',')]
+    results = _run([partial(em_rounds, v, c, args.iterations, args.prior_sd, args.learn_prior)
+                    if m == 'em' else
+                    partial(rounds, v, c, m, args.iterations, args.prior_sd, args.learn_prior)
                     for v, c, m in runs])
     out = {'prior_sd': args.prior_sd, 'learn_prior': args.learn_prior,
            'iterations': args.iterations}
