@@ -8,11 +8,16 @@ followed by the posterior query (as the estimator node does). Also in the same r
   how many hypotheses are tracked at the end, the mass dropped, and the largest difference of
   its posterior from the exact one over the stream;
 - ``scaling``: the exact update for K = 3, 6, 12 components and M = 50, 100 alpha hypotheses
-  (models fitted to K sampled patterns), so that the cost of more patterns is known.
+  (models fitted to K sampled patterns), so that the cost of more patterns is known;
+- ``end_event``: the component posterior once the movement's end is known
+  (OnlineEstimator.end_posterior, once per interaction) after a 10 s movement at the node's
+  20 Hz (200 samples), with the linear phase and with each component's MAP warp (the model's
+  phase warps, which training learns), K = 3 and 6.
 
 Prints one JSON object.
 """
 
+import copy
 import json
 import os
 import time
@@ -84,6 +89,29 @@ def scaling():
     return out
 
 
+def end_event():
+    """Median ms of end_posterior over 5 calls, linear phase and warped, K = 3 and 6."""
+    out = {}
+    for K in (3, 6):
+        demos = mixture_demos(seed=K, counts=(12,) * K, n_obs=3, n_ctrl=7, n_basis=15,
+                              durations=((1.0, 2.4),) * K)[0]
+        warped = MixtureIProMP(K, n_basis=15).fit(demos).fit_warps(demos)
+        linear = copy.copy(warped)
+        linear.warp_mean_ = linear.warp_sd_ = None
+        t, y = stream(max(demos, key=lambda d: d.duration))
+        for name, model in (('linear', linear), ('warped', warped)):
+            est = OnlineEstimator(model, n_alpha=50, min_interval=0.05)
+            est.offer_many(10.0 * t, y)                # 10 s at 20 Hz: 200 samples
+            times = []
+            for _ in range(5):
+                t0 = time.perf_counter()
+                est.end_posterior(10.0)
+                times.append(time.perf_counter() - t0)
+            out[f'K{K}_{name}_ms'] = float(np.median(times) * 1e3)
+        out[f'K{K}_samples'] = int(est.n_observations)
+    return out
+
+
 def main():
     demos, _, _, _ = mixture_demos(seed=0, n_obs=3, n_ctrl=7, n_basis=15)
     model = MixtureIProMP(3, n_basis=15).fit(demos)
@@ -107,6 +135,7 @@ def main():
                         'max_abs_posterior_difference': float(np.max(np.abs(
                             np.array(joints) - np.array(exact_joints))))}
     result['scaling'] = scaling()
+    result['end_event'] = end_event()
     print(json.dumps(result))
 
 

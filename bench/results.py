@@ -47,6 +47,8 @@ def jobs():
                           str(OUT / 'robustness')], None)
     out['cpu_kernels'] = ([sys.executable, str(ROOT / 'bench' / 'cpu_kernels.py')], None)
     out['nonlinear_phase'] = ([sys.executable, str(ROOT / 'bench' / 'nonlinear_phase.py')], None)
+    out['end_recognition'] = ([sys.executable, str(ROOT / 'bench' / 'end_recognition.py')],
+                              None)
     out['train'] = ([sys.executable, str(ROOT / 'bench' / 'train.py')], None)
     out['train_scaling'] = ([sys.executable, str(ROOT / 'bench' / 'train_scaling.py')], None)
     out['estimator'] = ([sys.executable, str(ROOT / 'bench' / 'estimator.py')], None)
@@ -217,6 +219,33 @@ def phase_section(nl) -> list:
     return L + ['']
 
 
+def end_section(er) -> list:
+    """Recognition given the end, the linear phase against each component's warp
+    (bench/end_recognition.py)."""
+    if not er:
+        return []
+    versions = [v for v in ('v1', 'v2') if v in er]
+    cases = [(v, c) for v in versions for c in ('clean', 'tempo') if c in er[v]]
+    names = {'clean': 'as recorded', 'tempo': 'pace changed'}
+    methods = [m for m in er[versions[0]]['clean'] if m not in ('k', 'warp_fits_not_converged')]
+    L = ['## Recognised once the end is known: the phase that bends (`bench/end_recognition.py`)',
+         '', "The interactions evaluation's 5 stratified folds; each held-out recording played "
+         "to the estimator, then its end given (the observer's 'end' event: "
+         '`OnlineEstimator.end_posterior`). "warped": each component reads the recording at '
+         "its MAP warp under the component's Gaussian over the warp (thesis eq. 34, learned by "
+         'training); "linear": the same model at z = t / T. "pace changed": the robustness '
+         "bench's `tempo`. Percent of the held-out recordings; K chosen per fold; warp fits "
+         'not converged: ' + ', '.join(f"{v} {names[c]} {er[v][c]['warp_fits_not_converged']}"
+                                        for v, c in cases) + '.', '',
+         '| method | ' + ' | '.join(f'NuiSI {v}, {names[c]}' for v, c in cases) + ' |',
+         '|---|' + '---|' * len(cases)]
+    L += [f'| {m} | ' + ' | '.join(f'{er[v][c][m]:.1f} %' for v, c in cases) + ' |'
+          for m in methods]
+    L.append('| K per fold | ' + ' | '.join(', '.join(map(str, er[v][c]['k'])) for v, c in cases)
+             + ' |')
+    return L + ['']
+
+
 def page(R: dict) -> str:
     commit = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], cwd=ROOT,
                             capture_output=True, text=True).stdout.strip()
@@ -325,6 +354,7 @@ def page(R: dict) -> str:
         L += [f'| {name.format(people=people + " cm")} | {f(v1)} | {f(v2)} |'
               for name, f in rows] + ['']
     L += phase_section(R.get('nonlinear_phase'))
+    L += end_section(R.get('end_recognition'))
     L += robustness_section(R.get('robustness'), R.get('cpu_kernels'))
     demos = [(r, R.get(f'demo_{r}')) for r in ROBOTS]
     if any(d for _, d in demos):

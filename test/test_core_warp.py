@@ -1,16 +1,23 @@
 """The monotone phase warp (core.warp, thesis eq. 34) against independent oracles: the integral
-by quadrature, the MAP of a Gaussian evidence in closed form, a warp recovered from a path
-sampled at a known one, and numpy's weighted moments."""
+by quadrature, derivatives by finite differences, the MAP of a Gaussian evidence in closed form,
+warps recovered from paths sampled at known ones, numpy's weighted moments, the mixture's
+warped posterior against the dense Gaussian formula and its linear special case."""
+
+import copy
 
 import numpy as np
 import pytest
 from scipy import integrate, linalg
+from scipy.special import logsumexp
+from scipy.stats import multivariate_normal, norm
 
 from mixture_ip_ros.core.basis import GaussianBasis
 from mixture_ip_ros.core.demonstration import Demonstration
+from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.promp import observation_stats, weight_posterior
-from mixture_ip_ros.core.warp import (CENTERS, N_WARP, WIDTH, map_warp, registered, warp,
-                                      warp_prior)
+from mixture_ip_ros.core.warp import (CENTERS, N_WARP, SD_FLOOR, START_SD, WIDTH,
+                                      learn_warp_priors, map_warp, registered, warp,
+                                      warp_jacobian, warp_prior)
 
 
 def quad_warp(u, b):
@@ -112,3 +119,212 @@ def test_warp_prior_rejects_misshaped_warps_and_zero_weights():
         warp_prior(np.zeros((4, 3)))
     with pytest.raises(ValueError, match='warps must be'):
         warp_prior(np.zeros((4, N_WARP)), np.zeros(4))
+
+
+def test_warp_jacobian_is_the_derivative_of_warp():
+    rng = np.random.default_rng(4)
+    u = np.r_[-0.1, np.linspace(0.0, 1.0, 37), 1.2]
+    b = rng.normal(0.0, 0.5, N_WARP)
+    z, J = warp_jacobian(u, b)
+    assert np.array_equal(z, warp(u, b))
+    h = 1e-6
+    fd = np.stack([(warp(u, b + h * e) - warp(u, b - h * e)) / (2 * h) for e in np.eye(N_WARP)],
+                  axis=1)
+    assert np.allclose(J, fd, atol=1e-7)
+    assert np.all(J[[0, -1]] == 0) and np.allclose(J[[1, -2]], 0.0)      # ends fixed
+
+
+def test_map_warp_with_the_gradient_finds_the_same_mode():
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(N_WARP, N_WARP))
+    A = A @ A.T + np.eye(N_WARP)
+    c = rng.normal(size=N_WARP)
+    b, good = map_warp(lambda x: (-0.5 * (x - c) @ A @ (x - c), -A @ (x - c)), np.zeros(N_WARP),
+                       0.4, gradient=True)
+    expected = linalg.solve(A + np.eye(N_WARP) / 0.16, A @ c)
+    assert good and np.allclose(b, expected, atol=1e-5)
+
+
+def test_learn_warp_priors_recovers_the_gaussian_the_warps_were_drawn_from():
+    """Sampled data with known parameters: each demonstration's evidence sharply peaked at its
+    own warp, drawn from its component's Gaussian; one whose evidence is not finite is left
+    out and reported."""
+    rng = np.random.default_rng(6)
+    true_mean = np.array([[0.5, 0.2, 0.0, -0.2, -0.5], [-0.3, 0.0, 0.4, 0.0, -0.3]])
+    true_sd = np.array([0.15, 0.25])
+    comp = np.repeat([0, 1], 200)
+    drawn = true_mean[comp] + true_sd[comp, None] * rng.normal(size=(400, N_WARP))
+    evidences = [lambda x, c=c: (-0.5e4 * np.sum((x - c) ** 2), -1e4 * (x - c)) for c in drawn]
+    evidences[7] = lambda x: (np.nan, np.zeros(N_WARP))
+    means, sds, good = learn_warp_priors(evidences, comp, 3)
+    assert not good[7] and good.sum() == 399
+    for k in range(2):
+        mine = drawn[(comp == k) & good]
+        assert np.allclose(means[k], mine.mean(axis=0), atol=0.01)
+        assert np.allclose(sds[k], np.sqrt(mine.var(axis=0) + SD_FLOOR ** 2), rtol=0.05)
+        assert np.all(np.abs(sds[k] - true_sd[k]) < 0.05)
+    assert np.array_equal(means[2], np.zeros(N_WARP))                    # no member: its start
+    assert np.array_equal(sds[2], np.full(N_WARP, START_SD))
+
+
+# ------------------------------------------------------------------ in the mixture
+
+def recordings_at_warps(spread, seed=7):
+    """Two interactions, each recording made at its own warp drawn from N(0, spread^2 I)."""
+    rng = np.random.default_rng(seed)
+    shapes = [np.array([[0.0, 1.0], [0.5, -0.5], [1.0, 1.0]]),
+              np.array([[1.0, -0.5], [0.0, 0.6], [-0.5, 0.5]])]       # (DOF, start / end)
+    demos = []
+    for k in range(2):
+        for _ in range(14):
+            T = rng.uniform(1.5, 2.0)
+            t = np.arange(0.0, T + 1e-9, 0.02)
+            z = warp(t / t[-1], spread * rng.normal(size=N_WARP))
+            start, end = shapes[k][:, 0], shapes[k][:, 1]
+            Y = start + np.outer(z, end - start) + 0.1 * np.sin(np.pi * z)[:, None]
+            Y += 0.002 * rng.normal(size=Y.shape)
+            demos.append(Demonstration(t, Y[:, :2], Y[:, 2:], label=str(k)))
+    return demos
+
+
+@pytest.fixture(scope='module')
+def warped_mixture():
+    """The mixture learned from recordings at warps of spread 0.3, and the recordings."""
+    demos = recordings_at_warps(0.3)
+    return MixtureIProMP(n_components=2, n_basis=8).fit(demos).fit_warps(demos), demos
+
+
+def test_fit_warps_learns_how_much_the_pace_varies(warped_mixture):
+    """Warps are relative to each component's mean path (a warp common to every recording is
+    part of that path): drawn around 0, the learned mean warp is about the linear phase; the
+    learned spread grows with the spread the recordings were made at (part of it is explained
+    by the weights' covariance, which was learned at the linear phase)."""
+    model, demos = warped_mixture
+    assert model.warp_failed_ == []
+    u = np.linspace(0.0, 1.0, 101)
+    for k in range(2):
+        assert np.max(np.abs(warp(u, model.warp_mean_[k]) - u)) < 0.05
+    steady = recordings_at_warps(0.05)
+    calm = MixtureIProMP(n_components=2, n_basis=8).fit(steady).fit_warps(steady)
+    assert model.warp_sd_.mean() > 1.5 * calm.warp_sd_.mean()
+    assert np.all(calm.warp_sd_ < 0.1)
+
+
+def test_warp_evidence_gradient_matches_finite_differences(warped_mixture):
+    model, demos = warped_mixture
+    d = demos[3]
+    Y = d.observed.copy()
+    Y[5:9] = np.nan                                           # a gap the gradient must skip
+    evidence = model._warp_evidence(0, d.phase, Y, 0.05)
+    b = np.array([0.2, -0.4, 0.1, 0.3, -0.1])
+    value, grad = evidence(b)
+    fd = [(evidence(b + 1e-6 * e)[0] - evidence(b - 1e-6 * e)[0]) / 2e-6 for e in np.eye(N_WARP)]
+    assert np.allclose(grad, fd, rtol=1e-4, atol=1e-4 * np.abs(grad).max())
+
+
+def test_warped_posterior_is_the_linear_one_when_the_warp_is_pinned(warped_mixture):
+    """The linear phase is the special case b = 0: with every component's Gaussian over b
+    pinned at 0, eq. 11 with the phase z = t / T."""
+    model, demos = warped_mixture
+    pinned = copy.copy(model)
+    pinned.warp_mean_ = np.zeros_like(model.warp_mean_)
+    pinned.warp_sd_ = np.full_like(model.warp_sd_, 1e-6)
+    d = demos[20]
+    p, b = pinned.warped_component_posterior(d.phase[::3], d.observed[::3], 1 / d.duration)
+    assert np.allclose(b, 0.0, atol=1e-6)
+    assert np.allclose(p, model.component_posterior(d.phase[::3], d.observed[::3],
+                                                    1 / d.duration), atol=1e-9)
+
+
+def test_warped_posterior_is_the_plug_in_of_each_components_mode(warped_mixture):
+    """p(k | D) ~ p(k) max_b p(D | k, b) N(b; m_k, s_k^2): the dense formula at the returned
+    b, and no b drawn near it scores higher."""
+    model, demos = warped_mixture
+    d = demos[2]
+    u, Y = d.phase[::2], d.observed[::2]
+    p, b = model.warped_component_posterior(u, Y, interval=0.04)
+    basis, N = model.basis_, model.n_basis
+    joint = []
+    for k in range(2):
+        A = np.kron(np.eye(2), basis(warp(u, b[k])))             # (2 m, 2 N): eq. 15's rows
+        dense_cov = A @ model.covariances_[k][:2 * N, :2 * N] @ A.T
+        noise = np.repeat(model._observed_noise(k, 0.04), len(u))
+        mean = A @ model.means_[k][:2 * N]
+        ev = multivariate_normal(mean, dense_cov + np.diag(noise)).logpdf(Y.T.ravel())
+        prior = norm(model.warp_mean_[k], model.warp_sd_[k]).logpdf(b[k]).sum()
+        joint.append(np.log(model.weights_[k]) + ev + prior)
+        rng = np.random.default_rng(k)
+        evidence = model._warp_evidence(k, u, Y, 0.04)
+        for x in b[k] + 0.02 * rng.normal(size=(20, N_WARP)):
+            other = evidence(x)[0] + norm(model.warp_mean_[k], model.warp_sd_[k]).logpdf(x).sum()
+            assert other <= joint[-1] - np.log(model.weights_[k]) + 1e-6
+    joint = np.array(joint)
+    assert np.allclose(p, np.exp(joint - logsumexp(joint)), atol=1e-9)
+
+
+def test_fit_warps_needs_the_demonstrations_the_model_was_fitted_to(warped_mixture):
+    model, demos = warped_mixture
+    with pytest.raises(ValueError, match='fit_warps needs the 28 Demonstrations'):
+        copy.copy(model).fit_warps(demos[:5])
+
+
+def test_a_model_without_warps_refuses_the_warped_posterior(warped_mixture):
+    model, demos = warped_mixture
+    linear = copy.copy(model)
+    linear.warp_mean_ = linear.warp_sd_ = None
+    with pytest.raises(ValueError, match='no phase warp'):
+        linear.warped_component_posterior(demos[0].phase, demos[0].observed)
+
+
+def test_a_warp_that_does_not_converge_is_named_and_left_out(warped_mixture, monkeypatch):
+    model, demos = warped_mixture
+    named = [Demonstration(d.t, d.observed, d.controlled, d.label, f'rec{i}')
+             for i, d in enumerate(demos)]
+    real = MixtureIProMP._warp_evidence
+    calls = []
+
+    def failing_for_rec4(self, k, u, Y, interval):
+        calls.append(len(calls))
+        evidence = real(self, k, u, Y, interval)
+        return (lambda b: (np.nan, np.zeros(N_WARP))) if len(calls) == 5 else evidence
+    monkeypatch.setattr(MixtureIProMP, '_warp_evidence', failing_for_rec4)
+    refit = copy.copy(model).fit_warps(named)
+    assert refit.warp_failed_ == ['rec4']
+    assert np.all(np.isfinite(refit.warp_mean_)) and np.all(refit.warp_sd_ > 0)
+
+
+def test_end_posterior_aligns_each_component_when_the_model_has_warps(warped_mixture):
+    from mixture_ip_ros.core.online import OnlineEstimator, decimated_rows, played_to
+    model, demos = warped_mixture
+    model = copy.copy(model)
+    model.noise_time_ = np.full_like(model.noise_time_, 0.2)  # residuals correlated over 0.2 s
+    d = demos[25]
+    est = OnlineEstimator(model, n_alpha=9)
+    played_to(est, d, d.duration)
+    t, Y = np.array(est._times), np.array(est._values)
+    spacing = max(model.warp_spacing, est.min_interval)
+    rows = decimated_rows(t, spacing)
+    assert spacing == 0.2 and 5 < len(rows) < len(t) / 3    # read as training read the warps
+    p = est.end_posterior(d.duration)
+    expected = model.warped_component_posterior(np.minimum(t[rows] / d.duration, 1.0), Y[rows],
+                                                1 / d.duration, spacing)[0]
+    assert np.array_equal(p, expected)
+
+
+def test_warp_stays_finite_and_monotone_for_extreme_parameters():
+    """An optimiser's line search tries huge b: the phase must stay a finite monotone warp."""
+    u = np.linspace(0.0, 1.0, 51)
+    for b in (np.full(N_WARP, 800.0), np.array([900.0, -900.0, 0.0, 700.0, -50.0])):
+        z, J = warp_jacobian(u, b)
+        assert np.all(np.isfinite(z)) and np.all(np.isfinite(J))
+        assert np.array_equal(z, warp(u, b)) and np.all(np.diff(z) >= 0)
+        assert z[0] == 0.0 and z[-1] == 1.0
+
+
+def test_map_warp_treats_a_warp_the_evidence_refuses_as_impossible():
+    def evidence(b):
+        if b[0] > 0.5:
+            raise np.linalg.LinAlgError('not positive definite')
+        return -0.5 * np.sum((b - 1.0) ** 2), -(b - 1.0)
+    b, good = map_warp(evidence, np.zeros(N_WARP), 1.0, gradient=True)
+    assert np.all(np.isfinite(b)) and b[0] <= 0.5

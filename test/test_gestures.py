@@ -53,10 +53,10 @@ def test_gesture_evaluation_reports_every_method_on_the_same_split(quick_gesture
         m['supervised_accuracy_by_fraction'])
     assert set(m['supervised_accuracy_phase_known_without_duration_by_fraction']) == set(
         m['supervised_accuracy_by_fraction'])
-    # Once the end time is known the phase is 1 there: the online estimator's posterior given
-    # the end is the phase-known posterior of the whole recording.
+    # Once the end time is known each component reads the recording at its MAP warp (the
+    # linear phase's case: test_online_component_given_the_end_is_the_phase_known_component).
     for who in ('supervised', 'unsupervised'):
-        assert m[f'{who}_accuracy_given_end'] == m[f'{who}_accuracy_phase_known_by_fraction']['1']
+        assert 0 <= m[f'{who}_accuracy_given_end'] <= 1
     assert 0 <= ref['unsupervised_accuracy_given_end'] <= 1
     # The per-class ProMP baseline's ridge is chosen by cross-validation on the training set.
     assert m['baseline_promp_shrinkage'] in (1e-4, 1e-3, 1e-2, 1e-1, 1.0)

@@ -226,10 +226,17 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
         model = MixtureIProMP(n_components=n_components, **params)
         regression = model.method == 'regression' and prepared is not None
         model.fit(prepared if regression else demos, labels=labels)
+    with stages('phase warps'):
+        model.fit_warps(demos)
+    if model.warp_failed_:
+        logger.warning('the phase warp of %d demonstration(s) did not converge; they keep the '
+                       'linear phase: %s', len(model.warp_failed_),
+                       ', '.join(map(str, model.warp_failed_)))
     info['n_components'] = int(n_components)
     info['prior_scale'] = float(model.prior_scale)
     info['speed_weight'] = float(model.speed_weight)
     info['noise_var'] = np.asarray(model.noise_var_).tolist()
+    info['warp_failed'] = [str(n) for n in model.warp_failed_]
     info['seconds'] = dict(stages.seconds)
     return model, info
 

@@ -22,6 +22,7 @@ from .demonstration import Demonstration
 from .gmm import (_gmm_log_prob, covariance_penalty_of_m_step, gmm_log_prob,
                   gmm_maximization, gmm_responsibilities, latent_e_step, noise_m_step)
 from .numerics import logsumexp_rows
+from .online import decimated_rows
 from .noise import MAX_LAG_S, correlation_time, noise_factor, residual_autocovariance
 from .patterns import PatternMixture, PatternSpace, offset_operators, translation_groups
 from .interaction import condition_on_observed, trajectory_distribution
@@ -30,6 +31,7 @@ from .phase import (alpha_log_density, alpha_m_step, alpha_penalty, alpha_prior_
 from .promp import (ObservationStats, covariance_penalty, expected_sq_residual, log_evidence,
                     empirical_bayes_smoothing, observation_stats, penalised_weights,
                     stack_stats, start_ridge, weight_posterior)
+from .warp import N_WARP, learn_warp_priors, map_warp, warp_jacobian, warp_log_density
 
 
 class Prepared(NamedTuple):
@@ -380,6 +382,8 @@ class MixtureIProMP:
         timing = data.timing
         timing_k = np.where(nk > 1e-12, resp.T @ timing / np.maximum(nk, 1e-12), timing.mean())
         self.alpha_std_ = alpha_prior_std(a_var, nk, timing_k)
+        self.warp_mean_ = self.warp_sd_ = None       # the linear phase until fit_warps
+        self.warp_failed_ = []
         del self._stats
 
     def _check_params(self):
@@ -455,6 +459,94 @@ class MixtureIProMP:
         if alpha is not None:
             lp += alpha_log_density([alpha], self.alpha_mean_, self.alpha_std_ ** 2)[0]
         return np.exp(lp - logsumexp(lp))
+
+    # ------------------------------------------------------------------ the phase that bends
+    def fit_warps(self, demonstrations):
+        """Learn each component's Gaussian over a monotone phase warp (the thesis's eq. 34,
+        core.warp): each demonstration's observed agent at phase z = g(t / T; b), b its MAP
+        under its most probable component (``resp_``), the Gaussian of each component learned
+        from its members' warps by EM (core.warp.learn_warp_priors). ``demonstrations``: the
+        ones the model was fitted to, in that order. Fitted: ``warp_mean_``, ``warp_sd_``
+        (K, core.warp.N_WARP) and ``warp_failed_``, the names (else indices) of the
+        demonstrations whose fit did not converge (left out of the Gaussian). A model without
+        them keeps the linear phase everywhere; with them, the component posterior once the
+        movement's end is known (:meth:`warped_component_posterior`) aligns each recording to
+        each component, where a pace that changes within the movement misplaces the linear
+        phase. Returns self."""
+        self._check_fitted()
+        demos = list(demonstrations)
+        if len(demos) != len(self.resp_) or not all(isinstance(d, Demonstration) for d in demos):
+            raise ValueError(f'fit_warps needs the {len(self.resp_)} Demonstrations the model '
+                             f'was fitted to, got {len(demos)}')
+        component = np.argmax(self.resp_, axis=1)
+        interval = self.warp_spacing
+        evidences = []
+        for d, k in zip(demos, component):
+            rows = np.flatnonzero(~np.isnan(d.observed).any(axis=1))
+            rows = rows[decimated_rows(d.t[rows], interval)]
+            evidences.append(self._warp_evidence(k, d.phase[rows], d.observed[rows], interval))
+        self.warp_mean_, self.warp_sd_, good = learn_warp_priors(evidences, component,
+                                                                 self.n_components)
+        self.warp_failed_ = [d.name if d.name else i for i, d in enumerate(demos)
+                             if not good[i]]
+        return self
+
+    @property
+    def warp_spacing(self) -> float:
+        """How far apart (s) the samples a warp is read from are: as far as the observed
+        agent's residuals stay correlated, so that each is worth one observation at that
+        spacing (core.noise); closer ones would count the same deviation many times and make
+        every warp look certain."""
+        return float(np.max(self.noise_time_[:self.n_observed_], initial=0.0))
+
+    def _warp_evidence(self, k, u, Y_obs, interval):
+        """b -> (log p(D | k, b), its gradient): the observed agent at relative times ``u``
+        sampled at least ``interval`` s apart (eq. 21), at phases z = g(u; b). The gradient is
+        the posterior expectation of the complete data's: d log p(D) / d psi_i = sum_j
+        ((y_ij - psi_i^T m_j) m_j - S_j psi_i) / sigma_j^2 (m_j, S_j the posterior mean and
+        covariance of DOF j's weights), through psi's derivative and dz / db (core.warp)."""
+        do, N = self.n_observed_ * self.n_basis, self.n_basis
+        chol = linalg.cho_factor(self.covariances_[k][:do, :do], lower=True)
+        mean, noise = self.means_[k][:do], self._observed_noise(k, interval)
+        Y = np.nan_to_num(Y_obs)
+        seen = ~np.isnan(Y_obs)
+
+        def evidence(b):
+            z, dz = warp_jacobian(u, b)
+            m, S, ll = weight_posterior(observation_stats(self.basis_, z, Y_obs), mean, chol,
+                                        noise)
+            psi, dpsi = self.basis_.evaluate(z, order=1)
+            dll = np.zeros_like(psi)
+            for j in range(self.n_observed_):
+                mj, Sj = m[j * N:(j + 1) * N], S[j * N:(j + 1) * N, j * N:(j + 1) * N]
+                resid = np.where(seen[:, j], Y[:, j] - psi @ mj, 0.0)
+                dll += (resid[:, None] * mj - seen[:, [j]] * (psi @ Sj)) / noise[j]
+            return ll, dz.T @ np.einsum('in,in->i', dpsi, dll)
+        return evidence
+
+    def warped_component_posterior(self, u, Y_obs, alpha=None, interval=None):
+        """Eq. 11 with each component's own phase: observations Y_obs (m, P) of the observed
+        agent at relative times ``u`` = t / T (the movement's end known), at least ``interval``
+        s apart (the noise of such samples, :meth:`observed_noise_var_at`; None: the
+        recordings' own rate, as :meth:`component_posterior`), under component k at
+        phase g(u; b_k), b_k the MAP of p(D | k, b) p(b | k) under k's Gaussian over the warp
+        (:meth:`fit_warps`). The warp is maximised rather than integrated out (the plug-in of
+        its mode: p(k | D) ~ p(k) max_b p(D | k, b) p(b | k)), with ``alpha`` = 1/T also
+        p(alpha | k). Returns (p(k | D) (K,), b (K, N_WARP)); a component whose fit does not
+        converge is scored at its mean warp."""
+        self._check_fitted()
+        if self.warp_mean_ is None:
+            raise ValueError('the model has no phase warp: fit_warps first')
+        u, Y_obs = _validate_observation(u, Y_obs, self.n_observed_)
+        lp, b = np.log(self.weights_), np.empty((self.n_components, N_WARP))
+        for k in range(self.n_components):
+            evidence = self._warp_evidence(k, u, Y_obs, interval)
+            b[k] = map_warp(evidence, self.warp_mean_[k], self.warp_sd_[k], gradient=True)[0]
+            lp[k] += evidence(b[k])[0] + warp_log_density(b[k], self.warp_mean_[k],
+                                                         self.warp_sd_[k])
+        if alpha is not None:
+            lp += alpha_log_density([alpha], self.alpha_mean_, self.alpha_std_ ** 2)[0]
+        return np.exp(lp - logsumexp(lp)), b
 
     def score_demonstrations(self, demonstrations):
         """log p(D_i, alpha_i) of each demonstration, every DOF of both agents, phase known

@@ -505,14 +505,24 @@ class OnlineEstimator:
         batch posterior with the phase known (MixtureIProMP.component_posterior with alpha),
         from the samples absorbed. Samples after ``t_end`` are taken at phase 1: the end is
         dated back to when the hand stopped, and after it the hand is at rest where the
-        movement ended. Raises ValueError without samples or for a t_end that is not positive."""
+        movement ended. With the model's phase warps (MixtureIProMP.fit_warps), each component
+        at its own MAP warp of the samples (MixtureIProMP.warped_component_posterior): a pace
+        that changed within the movement no longer misplaces the phase. Raises ValueError
+        without samples or for a t_end that is not positive."""
         if not self._times:
             raise ValueError('no observation absorbed yet')
         if not (np.isfinite(t_end) and t_end > 0):
             raise ValueError(f'the end time must be a positive number of seconds, got {t_end!r}')
         alpha = 1.0 / float(t_end)
-        z = np.minimum(alpha * np.asarray(self._times), 1.0)
-        return self.model.component_posterior(z, np.asarray(self._values), alpha=alpha)
+        t, Y = np.asarray(self._times), np.asarray(self._values)
+        if self.model.warp_mean_ is None:
+            return self.model.component_posterior(np.minimum(alpha * t, 1.0), Y, alpha=alpha)
+        # The samples as training read each recording's warp (MixtureIProMP.fit_warps).
+        spacing = max(self.model.warp_spacing, self.min_interval)
+        order = np.argsort(t, kind='stable')
+        rows = order[decimated_rows(t[order], spacing)]
+        return self.model.warped_component_posterior(np.minimum(alpha * t[rows], 1.0), Y[rows],
+                                                      alpha, spacing)[0]
 
     def observed_weights(self, k, m):
         """Posterior N(mean, cov) of the observed agent's weights under hypothesis (k, m).

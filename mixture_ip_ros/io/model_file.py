@@ -10,6 +10,9 @@ The metadata names every DOF and its unit, in column order: ``observed_names``,
 iiwa only, before units were recorded) load with units 'm' and 'rad'; files before format 4
 (before the phase-speed weight) load with weight 1, the posterior they were used with. Format 4
 is written so that an older package, which would drop the weight, refuses the file instead.
+A model with a phase warp (MixtureIProMP.fit_warps) adds the arrays ``warp_mean`` and
+``warp_sd``; a file without them loads with the linear phase, and an older package reading one
+uses the linear phase.
 """
 
 import json
@@ -24,6 +27,7 @@ from mixture_ip_ros.core.demonstration import Layout
 from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.novelty import NoveltyThresholds
 from mixture_ip_ros.core.patterns import translation_groups
+from mixture_ip_ros.core.warp import N_WARP
 from mixture_ip_ros.io.files import write_atomic
 
 FORMAT = 'mixture_ip_ros/mixture-iprompt'
@@ -93,6 +97,9 @@ def save_model(path, model: MixtureIProMP, *, layout: Layout = None, observed_na
         'extra': extra or {},
     }
     arrays = {name: np.asarray(getattr(model, name + '_'), dtype=float) for name in _ARRAYS}
+    if getattr(model, 'warp_mean_', None) is not None:      # the phase that bends, learned
+        arrays.update(warp_mean=model.warp_mean_, warp_sd=model.warp_sd_)
+        meta['warp_failed'] = [_jsonable_param(n) for n in model.warp_failed_]
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     return write_atomic(path, lambda f: np.savez(f, metadata=np.array(json.dumps(meta)),
@@ -204,6 +211,17 @@ def load_model(path, *, observed_names=None, controlled_names=None):
     except (KeyError, TypeError, ValueError) as e:
         fail(f'invalid fitted smoothing or offsets ({e})')
     model.classes_ = meta.get('classes')
+    model.warp_mean_ = model.warp_sd_ = None        # files without them: the linear phase
+    model.warp_failed_ = list(meta.get('warp_failed') or [])
+    if ('warp_mean' in data) != ('warp_sd' in data):
+        fail('warp_mean and warp_sd go together')
+    if 'warp_mean' in data:
+        mean, sd = data['warp_mean'], data['warp_sd']
+        if (mean.shape != (K, N_WARP) or sd.shape != (K, N_WARP)
+                or not np.all(np.isfinite(mean)) or not np.all(np.isfinite(sd) & (sd > 0))):
+            fail(f'the phase warp needs finite warp_mean and positive warp_sd of shape '
+                 f'({K}, {N_WARP}), got {mean.shape} and {sd.shape}')
+        model.warp_mean_, model.warp_sd_ = mean, sd
     try:
         model.novelty_ = novelty_thresholds(meta)
     except (KeyError, TypeError, ValueError) as e:

@@ -86,7 +86,7 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
     # Supervised: one component per class, tied noise and one covariance prior for all.
     t0 = time.perf_counter()
     sup_model = MixtureIProMP(n_components=len(classes), random_state=seed, **params).fit(
-        train, labels=y_train)
+        train, labels=y_train).fit_warps(train)
     cls = sup_model.classes_
     sup = accuracy([[cls[k] for k in online_components(sup_model, d, fractions, config.n_alpha,
                                                        config.min_interval)] for d in test],
@@ -115,7 +115,7 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
     # with the same K. Shows what the unsupervised fit does when the selection cannot choose.
     t0 = time.perf_counter()
     Kc = len(classes)
-    ref = MixtureIProMP(n_components=Kc, random_state=seed, **params).fit(train)
+    ref = MixtureIProMP(n_components=Kc, random_state=seed, **params).fit(train).fit_warps(train)
     ref_names = majority_labels(ref, train)
     ref_acc = accuracy([[ref_names[k] for k in online_components(
         ref, d, fractions, config.n_alpha, config.min_interval)] for d in test], y_test)
@@ -182,7 +182,8 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
         'units': {'accuracy': 'fraction of test gestures whose person is named correctly',
                   'fractions': 'part of the recording observed (from its first sample)',
                   'given_end': 'the whole recording fed to the online estimator (phase '
-                               'unknown), then its end time given, where the phase is 1 '
+                               'unknown), then its end time given, where the phase is 1, '
+                               'each component at its MAP warp of the recording '
                                '(OnlineEstimator.end_posterior); beside the same without '
                                'the end, the "1" of the phase-unknown curves',
                   'noise_var': 'g^2'},

@@ -1,0 +1,87 @@
+"""Recognition once the movement's end is known (the observer's 'end' event), with the linear
+phase and with each component's own phase warp (the thesis's eq. 34, core.warp;
+MixtureIProMP.fit_warps, which training runs). Prints one JSON object.
+
+On NuiSI v1 and v2, as recorded and with the people's pace changed within each recording (the
+robustness bench's ``tempo``: scenarios.corruption.retimed), the interactions evaluation's 5
+stratified folds: the discovered mixture (K chosen, each component named by its training
+recordings' majority) and the supervised one, each held-out recording played to the estimator
+and its end posterior read (OnlineEstimator.end_posterior: the component at phase t / T, or at
+its MAP warp of the recording); the same model without its warps gives the linear phase, so
+the two differ in the phase only. Beside them the nearest training recording by DTW (the
+evaluation's baseline) on the whole recording. Percent of held-out recordings recognised.
+
+    OPENBLAS_NUM_THREADS=1 python bench/end_recognition.py [--versions v1,v2]
+"""
+
+import argparse
+import copy
+from functools import partial
+import json
+import time
+
+import numpy as np
+
+from mixture_ip_ros.app.evaluation.baselines import NearestNeighbour
+from mixture_ip_ros.app.evaluation.common import (majority_labels, online_component_given_end,
+                                                  trained)
+from mixture_ip_ros.app.evaluation.interactions import (_run, interactions_config,
+                                                        stratified_folds)
+from mixture_ip_ros.scenarios import nuisi
+from mixture_ip_ros.scenarios.corruption import corrupted
+
+CASES = {'clean': (), 'tempo': ('tempo',)}
+
+
+def linear(model):
+    """``model`` with the linear phase: its warps dropped, nothing else changed."""
+    out = copy.copy(model)
+    out.warp_mean_ = out.warp_sd_ = None
+    return out
+
+
+def case(version, name, seed=0) -> dict:
+    demos = nuisi.demonstrations(version, 'train') + nuisi.demonstrations(version, 'test')
+    demos = corrupted(demos, CASES[name], seed=seed)
+    labels = np.array([d.label for d in demos])
+    folds = stratified_folds(labels, seed=seed)
+    config = interactions_config()
+    right, ks, failed = {}, [], 0
+    for f in range(folds.max() + 1):
+        train_i, test_i = np.flatnonzero(folds != f), np.flatnonzero(folds == f)
+        train = [demos[i] for i in train_i]
+        found, info = trained(train, config, n_jobs=1, random_state=seed)
+        supervised, sup_info = trained(train, config, n_jobs=1, labels=labels[train_i])
+        ks.append(int(info['n_components']))
+        failed += len(info['warp_failed']) + len(sup_info['warp_failed'])
+        models = {'discovered': (found, majority_labels(found, train)),
+                  'supervised': (supervised, list(supervised.classes_))}
+        for what, (model, names) in models.items():
+            for phase, mod in (('warped', model), ('linear', linear(model))):
+                right.setdefault(f'{what}, {phase}', []).extend(
+                    names[online_component_given_end(mod, demos[i], config.n_alpha,
+                                                      config.min_interval)] == labels[i]
+                    for i in test_i)
+        nn = NearestNeighbour(config.min_interval, ()).fit(train, labels[train_i])
+        right.setdefault('nearest recording (DTW)', []).extend(
+            nn.labels_[nn.matches(demos[i], (1.0,))[0][0]] == labels[i] for i in test_i)
+    return {'k': ks, 'warp_fits_not_converged': failed,
+            **{m: round(100.0 * float(np.mean(r)), 1) for m, r in right.items()}}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument('--versions', default='v1,v2')
+    args = ap.parse_args()
+    t0 = time.perf_counter()
+    runs = [(v, c) for v in args.versions.split(',') for c in CASES]
+    results = _run([partial(case, v, c) for v, c in runs])
+    out = {}
+    for (v, c), r in zip(runs, results):
+        out.setdefault(v, {})[c] = r
+    out['runtime_s'] = round(time.perf_counter() - t0, 1)
+    print(json.dumps(out))
+
+
+if __name__ == '__main__':
+    main()
