@@ -6,10 +6,11 @@ On NuiSI v1 and v2, as recorded and with the people's pace changed within each r
 robustness bench's ``tempo``: scenarios.corruption.retimed), the interactions evaluation's 5
 stratified folds: the discovered mixture (K chosen, each component named by its training
 recordings' majority) and the supervised one, each held-out recording played to the estimator
-and its end posterior read (OnlineEstimator.end_posterior: the component at phase t / T, or at
-its MAP warp of the recording); the same model without its warps gives the linear phase, so
-the two differ in the phase only. Beside them the nearest training recording by DTW (the
-evaluation's baseline) on the whole recording. Percent of held-out recordings recognised.
+and its end posterior read (OnlineEstimator.end_posterior: each component's warp integrated out);
+the same model at the linear phase, its warps pinned at b = 0 (the same samples and noise: the
+phase alone differs) and without warps (every sample absorbed at the recordings' own noise, as
+a model without them reads a recording). Beside them the nearest training recording by DTW
+(the evaluation's baseline) on the whole recording. Percent of held-out recordings recognised.
 
     OPENBLAS_NUM_THREADS=1 python bench/end_recognition.py [--versions v1,v2]
 """
@@ -33,11 +34,15 @@ from mixture_ip_ros.scenarios.corruption import corrupted
 CASES = {'clean': (), 'tempo': ('tempo',)}
 
 
-def linear(model):
-    """``model`` with the linear phase: its warps dropped, nothing else changed."""
-    out = copy.copy(model)
-    out.warp_mean_ = out.warp_sd_ = None
-    return out
+def phases(model):
+    """``model`` as it is and at the linear phase, two ways: its warps pinned at b = 0 (read
+    from the same samples with the same noise as the warped one: the phase alone differs), and
+    without warps (every sample absorbed, at the recordings' noise: a model without them)."""
+    pinned, plain = copy.copy(model), copy.copy(model)
+    pinned.warp_mean_ = np.zeros_like(model.warp_mean_)
+    pinned.warp_sd_ = np.full_like(model.warp_sd_, 1e-6)
+    plain.warp_mean_ = plain.warp_sd_ = None
+    return {'warped': model, 'linear, same samples': pinned, 'linear, every sample': plain}
 
 
 def case(version, name, seed=0) -> dict:
@@ -57,7 +62,7 @@ def case(version, name, seed=0) -> dict:
         models = {'discovered': (found, majority_labels(found, train)),
                   'supervised': (supervised, list(supervised.classes_))}
         for what, (model, names) in models.items():
-            for phase, mod in (('warped', model), ('linear', linear(model))):
+            for phase, mod in phases(model).items():
                 right.setdefault(f'{what}, {phase}', []).extend(
                     names[online_component_given_end(mod, demos[i], config.n_alpha,
                                                       config.min_interval)] == labels[i]

@@ -346,8 +346,8 @@ def version(v, prior_sd):
         failed += [d.name for d, (_, good) in zip(train, fits) if not good]
         b = np.array([x for x, _ in fits])
         means = np.array([b[np.equal(comp_of, k)].mean(axis=0) for k in range(len(names))])
-        registered = [registered(d, bi) for d, bi in zip(train, b)]
-        reg_model, _ = trained(registered, config, n_jobs=1, labels=labels[train_i])
+        at_warps = [registered(d, bi) for d, bi in zip(train, b)]
+        reg_model, _ = trained(at_warps, config, n_jobs=1, labels=labels[train_i])
         linear = np.zeros((len(names), N_WARP))
         durations = [np.mean([d.duration for d, c in zip(train, comp_of) if c == k])
                      for k in range(len(names))]

@@ -122,6 +122,7 @@ def em_rounds(version, case, iterations, prior_sd, learn) -> dict:
     priors = [(np.zeros(N_WARP), np.full(N_WARP, prior_sd))] * K
     out = {'k': int(K), 'ari': [round(float(adjusted_rand_score(labels, comp)), 3)],
            'switched': []}
+    current = data
     for _ in range(iterations):
         temps = templates(model)
         score, b = np.empty((len(data), K)), np.empty((len(data), K, N_WARP))

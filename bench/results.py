@@ -222,21 +222,23 @@ def phase_section(nl) -> list:
 def end_section(er) -> list:
     """Recognition given the end, the linear phase against each component's warp
     (bench/end_recognition.py)."""
-    if not er:
+    versions = [v for v in ('v1', 'v2') if v in (er or {})]
+    if not versions:
         return []
-    versions = [v for v in ('v1', 'v2') if v in er]
     cases = [(v, c) for v in versions for c in ('clean', 'tempo') if c in er[v]]
     names = {'clean': 'as recorded', 'tempo': 'pace changed'}
     methods = [m for m in er[versions[0]]['clean'] if m not in ('k', 'warp_fits_not_converged')]
     L = ['## Recognised once the end is known: the phase that bends (`bench/end_recognition.py`)',
          '', "The interactions evaluation's 5 stratified folds; each held-out recording played "
          "to the estimator, then its end given (the observer's 'end' event: "
-         '`OnlineEstimator.end_posterior`). "warped": each component reads the recording at '
-         "its MAP warp under the component's Gaussian over the warp (thesis eq. 34, learned by "
-         'training); "linear": the same model at z = t / T. "pace changed": the robustness '
-         "bench's `tempo`. Percent of the held-out recordings; K chosen per fold; warp fits "
-         'not converged: ' + ', '.join(f"{v} {names[c]} {er[v][c]['warp_fits_not_converged']}"
-                                        for v, c in cases) + '.', '',
+         '`OnlineEstimator.end_posterior`). "warped": each component\'s warp integrated out '
+         "under the component's Gaussian over it (thesis eq. 34, learned by training); "
+         '"linear, same samples": the same model with the warp pinned at b = 0 (the phase alone '
+         'differs); "linear, every sample": without warps, as a model without them reads the '
+         "recording. \"pace changed\": the robustness bench's `tempo`. Percent of the held-out "
+         'recordings; K chosen per fold; warp fits not converged: ' + ', '.join(
+             f"{v} {names[c]} {er[v][c]['warp_fits_not_converged']}" for v, c in cases) + '.',
+         '',
          '| method | ' + ' | '.join(f'NuiSI {v}, {names[c]}' for v, c in cases) + ' |',
          '|---|' + '---|' * len(cases)]
     L += [f'| {m} | ' + ' | '.join(f'{er[v][c][m]:.1f} %' for v, c in cases) + ' |'

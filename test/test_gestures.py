@@ -53,8 +53,9 @@ def test_gesture_evaluation_reports_every_method_on_the_same_split(quick_gesture
         m['supervised_accuracy_by_fraction'])
     assert set(m['supervised_accuracy_phase_known_without_duration_by_fraction']) == set(
         m['supervised_accuracy_by_fraction'])
-    # Once the end time is known each component reads the recording at its MAP warp (the
-    # linear phase's case: test_online_component_given_the_end_is_the_phase_known_component).
+    # Once the end time is known each component reads the recording at its own warp (the
+    # linear phase's case: test_online_component_given_the_end_is_the_phase_known_component_
+    # of_the_whole_movement).
     for who in ('supervised', 'unsupervised'):
         assert 0 <= m[f'{who}_accuracy_given_end'] <= 1
     assert 0 <= ref['unsupervised_accuracy_given_end'] <= 1

@@ -203,6 +203,14 @@ def test_the_phase_warps_round_trip_and_a_file_without_them_keeps_the_linear_pha
         with pytest.raises(ModelFileError, match=message):
             load_model(path)
         save_model(path, warped, observed_names=OBS, controlled_names=CTRL)
+    meta = json.loads(str(_arrays(path)['metadata']))
+    for key, value, message in (('warp', {'log_rate_bumps': 7, 'bump_width': 0.2},
+                                 'another family'),
+                                ('warp_failed', 'rec4', 'warp_failed must list')):
+        _rewrite(path, metadata=np.array(json.dumps({**meta, key: value})))
+        with pytest.raises(ModelFileError, match=message):
+            load_model(path)
+    save_model(path, warped, observed_names=OBS, controlled_names=CTRL)
     data = _arrays(path)
     del data['warp_sd']
     with open(path, 'wb') as f:

@@ -22,8 +22,8 @@ from .demonstration import Demonstration
 from .gmm import (_gmm_log_prob, covariance_penalty_of_m_step, gmm_log_prob,
                   gmm_maximization, gmm_responsibilities, latent_e_step, noise_m_step)
 from .numerics import logsumexp_rows
-from .online import decimated_rows
-from .noise import MAX_LAG_S, correlation_time, noise_factor, residual_autocovariance
+from .noise import (MAX_LAG_S, correlation_time, decimated_rows, noise_factor,
+                    residual_autocovariance)
 from .patterns import PatternMixture, PatternSpace, offset_operators, translation_groups
 from .interaction import condition_on_observed, trajectory_distribution
 from .phase import (alpha_log_density, alpha_m_step, alpha_penalty, alpha_prior_std,
@@ -31,7 +31,7 @@ from .phase import (alpha_log_density, alpha_m_step, alpha_penalty, alpha_prior_
 from .promp import (ObservationStats, covariance_penalty, expected_sq_residual, log_evidence,
                     empirical_bayes_smoothing, observation_stats, penalised_weights,
                     stack_stats, start_ridge, weight_posterior)
-from .warp import N_WARP, learn_warp_priors, map_warp, warp_jacobian, warp_log_density
+from .warp import N_WARP, laplace, learn_warp_priors, map_warp, warp_jacobian
 
 
 class Prepared(NamedTuple):
@@ -474,6 +474,9 @@ class MixtureIProMP:
         each component, where a pace that changes within the movement misplaces the linear
         phase. Returns self."""
         self._check_fitted()
+        if not hasattr(self, 'resp_'):
+            raise ValueError('fit_warps needs the responsibilities of a fit; a model read from '
+                             'a file has none (fit it again)')
         demos = list(demonstrations)
         if len(demos) != len(self.resp_) or not all(isinstance(d, Demonstration) for d in demos):
             raise ValueError(f'fit_warps needs the {len(self.resp_)} Demonstrations the model '
@@ -482,7 +485,7 @@ class MixtureIProMP:
         interval = self.warp_spacing
         evidences = []
         for d, k in zip(demos, component):
-            rows = np.flatnonzero(~np.isnan(d.observed).any(axis=1))
+            rows = np.flatnonzero(~np.isnan(d.observed).all(axis=1))
             rows = rows[decimated_rows(d.t[rows], interval)]
             evidences.append(self._warp_evidence(k, d.phase[rows], d.observed[rows], interval))
         self.warp_mean_, self.warp_sd_, good = learn_warp_priors(evidences, component,
@@ -497,6 +500,7 @@ class MixtureIProMP:
         agent's residuals stay correlated, so that each is worth one observation at that
         spacing (core.noise); closer ones would count the same deviation many times and make
         every warp look certain."""
+        self._check_fitted()
         return float(np.max(self.noise_time_[:self.n_observed_], initial=0.0))
 
     def _warp_evidence(self, k, u, Y_obs, interval):
@@ -529,11 +533,11 @@ class MixtureIProMP:
         agent at relative times ``u`` = t / T (the movement's end known), at least ``interval``
         s apart (the noise of such samples, :meth:`observed_noise_var_at`; None: the
         recordings' own rate, as :meth:`component_posterior`), under component k at
-        phase g(u; b_k), b_k the MAP of p(D | k, b) p(b | k) under k's Gaussian over the warp
-        (:meth:`fit_warps`). The warp is maximised rather than integrated out (the plug-in of
-        its mode: p(k | D) ~ p(k) max_b p(D | k, b) p(b | k)), with ``alpha`` = 1/T also
-        p(alpha | k). Returns (p(k | D) (K,), b (K, N_WARP)); a component whose fit does not
-        converge is scored at its mean warp."""
+        phase g(u; b), the warp integrated out under k's Gaussian over it (:meth:`fit_warps`)
+        by Laplace's method at its MAP b_k (core.warp.laplace): p(k | D) ~ p(k) int p(D | k, b)
+        p(b | k) db, with ``alpha`` = 1/T also p(alpha | k). Returns (p(k | D) (K,),
+        b (K, N_WARP)). A component whose evidence cannot be computed at its mode (a
+        numerical failure) gets probability 0; if every one does, ValueError."""
         self._check_fitted()
         if self.warp_mean_ is None:
             raise ValueError('the model has no phase warp: fit_warps first')
@@ -541,9 +545,15 @@ class MixtureIProMP:
         lp, b = np.log(self.weights_), np.empty((self.n_components, N_WARP))
         for k in range(self.n_components):
             evidence = self._warp_evidence(k, u, Y_obs, interval)
-            b[k] = map_warp(evidence, self.warp_mean_[k], self.warp_sd_[k], gradient=True)[0]
-            lp[k] += evidence(b[k])[0] + warp_log_density(b[k], self.warp_mean_[k],
-                                                         self.warp_sd_[k])
+            prior = self.warp_mean_[k], self.warp_sd_[k]
+            b[k] = map_warp(evidence, *prior, gradient=True)[0]
+            try:
+                lp[k] += laplace(evidence, b[k], *prior)[0]
+            except (ValueError, np.linalg.LinAlgError):
+                lp[k] = -np.inf
+        lp[~np.isfinite(lp)] = -np.inf
+        if not np.isfinite(lp).any():
+            raise ValueError('no component can explain these observations at any warp')
         if alpha is not None:
             lp += alpha_log_density([alpha], self.alpha_mean_, self.alpha_std_ ** 2)[0]
         return np.exp(lp - logsumexp(lp)), b

@@ -70,3 +70,21 @@ def noise_factor(tau, period: float, interval: float) -> np.ndarray:
     if spacing <= 0:
         return np.ones_like(tau)
     return np.maximum(1.0, tau / spacing)
+
+
+def spaced(t: float, t_last: float, min_interval: float) -> bool:
+    """The decimation rule: whether a sample at ``t`` is at least ``min_interval`` after the
+    last one used, at ``t_last`` (stamps are ns: no float slack beyond 1 ns)."""
+    return t - t_last >= min_interval - 1e-9
+
+
+def decimated_rows(t, min_interval, last=None) -> np.ndarray:
+    """Indices of the samples the online estimator absorbs from increasing times ``t``, after
+    one used at ``last`` (None: none yet): the first, then each one at least ``min_interval``
+    after the last one absorbed (OnlineEstimator.admit, in float64)."""
+    rows = []
+    for i, ti in enumerate(np.asarray(t, dtype=float).tolist()):
+        if last is None or spaced(ti, last, min_interval):
+            rows.append(i)
+            last = ti
+    return np.array(rows, dtype=int)

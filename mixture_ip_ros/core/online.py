@@ -18,6 +18,7 @@ from scipy import linalg
 from ._fast import (W, basis_rows, compact_lanes, expected_trajectory, from_lanes,
                     kalman_update, mean_trajectory, to_lanes, tri_index)
 from .interaction import trajectory_distribution
+from .noise import decimated_rows, spaced
 from .numerics import logsumexp, logsumexp_rows
 from .phase import (alpha_grid, alpha_log_prior, log_density_on_grid, tempered_speed_posterior,
                     tempered_speed_weights)
@@ -36,24 +37,6 @@ def supported(p):
     costs a trajectory."""
     keep = np.flatnonzero(p >= SPEED_SUPPORT * p.max())
     return keep, p[keep] / p[keep].sum()
-
-
-def spaced(t: float, t_last: float, min_interval: float) -> bool:
-    """The decimation rule: whether a sample at ``t`` is at least ``min_interval`` after the
-    last one used, at ``t_last`` (stamps are ns: no float slack beyond 1 ns)."""
-    return t - t_last >= min_interval - 1e-9
-
-
-def decimated_rows(t, min_interval, last=None) -> np.ndarray:
-    """Indices of the samples the online estimator absorbs from increasing times ``t``, after
-    one used at ``last`` (None: none yet): the first, then each one at least ``min_interval``
-    after the last one absorbed (OnlineEstimator.admit, in float64)."""
-    rows = []
-    for i, ti in enumerate(np.asarray(t, dtype=float).tolist()):
-        if last is None or spaced(ti, last, min_interval):
-            rows.append(i)
-            last = ti
-    return np.array(rows, dtype=int)
 
 
 class OnlineEstimator:
@@ -501,13 +484,14 @@ class OnlineEstimator:
         """p(k | D, T = t_end): the component posterior once the movement's end time is known
         (the observer's 'end' event, ``t_end`` s after onset), where its phase is 1, so
         alpha = 1/t_end exactly: p(k) p(alpha | k) p(D | k, alpha) normalised over k (eqs. 11,
-        17-18 at that alpha; the Jacobian from T to alpha is the same for every k). This is the
-        batch posterior with the phase known (MixtureIProMP.component_posterior with alpha),
-        from the samples absorbed. Samples after ``t_end`` are taken at phase 1: the end is
-        dated back to when the hand stopped, and after it the hand is at rest where the
-        movement ended. With the model's phase warps (MixtureIProMP.fit_warps), each component
-        at its own MAP warp of the samples (MixtureIProMP.warped_component_posterior): a pace
-        that changed within the movement no longer misplaces the phase. Raises ValueError
+        17-18 at that alpha; the Jacobian from T to alpha is the same for every k). Without
+        phase warps in the model this is the batch posterior with the phase known
+        (MixtureIProMP.component_posterior with alpha) from the samples absorbed; with them
+        (MixtureIProMP.fit_warps), each component's warp is integrated out
+        (MixtureIProMP.warped_component_posterior) over the samples spaced as training read
+        the warps: a pace that changed within the movement no longer misplaces the phase.
+        Samples after ``t_end`` are taken at phase 1: the end is dated back to when the hand
+        stopped, and after it the hand is at rest where the movement ended. Raises ValueError
         without samples or for a t_end that is not positive."""
         if not self._times:
             raise ValueError('no observation absorbed yet')
@@ -515,14 +499,21 @@ class OnlineEstimator:
             raise ValueError(f'the end time must be a positive number of seconds, got {t_end!r}')
         alpha = 1.0 / float(t_end)
         t, Y = np.asarray(self._times), np.asarray(self._values)
-        if self.model.warp_mean_ is None:
-            return self.model.component_posterior(np.minimum(alpha * t, 1.0), Y, alpha=alpha)
-        # The samples as training read each recording's warp (MixtureIProMP.fit_warps).
-        spacing = max(self.model.warp_spacing, self.min_interval)
-        order = np.argsort(t, kind='stable')
-        rows = order[decimated_rows(t[order], spacing)]
-        return self.model.warped_component_posterior(np.minimum(alpha * t[rows], 1.0), Y[rows],
-                                                      alpha, spacing)[0]
+        if self.model.warp_mean_ is not None:
+            # Samples as far apart as training read each recording's warp
+            # (MixtureIProMP.fit_warps), and no closer than this estimator's.
+            spacing = max(self.model.warp_spacing, self.min_interval)
+            order = np.argsort(t, kind='stable')
+            rows = order[decimated_rows(t[order], spacing)]
+            try:
+                p = self.model.warped_component_posterior(np.minimum(alpha * t[rows], 1.0),
+                                                          Y[rows], alpha, spacing)[0]
+            except (ValueError, np.linalg.LinAlgError):
+                p = None
+            if p is not None and np.all(np.isfinite(p)):
+                return p
+            # A numerical failure of every warp: the linear phase still gives an answer.
+        return self.model.component_posterior(np.minimum(alpha * t, 1.0), Y, alpha=alpha)
 
     def observed_weights(self, k, m):
         """Posterior N(mean, cov) of the observed agent's weights under hypothesis (k, m).

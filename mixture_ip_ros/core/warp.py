@@ -30,11 +30,16 @@ def _rate(b):
     return np.exp(log_rate - log_rate.max())
 
 
+def _cumulative(f):
+    """int_0^u f over GRID by trapezoids, for each column of ``f`` (len(GRID), m)."""
+    steps = 0.5 * (f[1:] + f[:-1]) * np.diff(GRID)[:, None]
+    return np.vstack([np.zeros((1, f.shape[1])), np.cumsum(steps, axis=0)])
+
+
 def warp(u, b):
     """z = g(u; b) at relative times ``u``; u outside [0, 1] is kept (before the onset, after
     the end, where the linear phase's own extrapolation is what a ProMP clamps)."""
-    rate = _rate(b)
-    cum = np.r_[0.0, np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(GRID))]
+    cum = _cumulative(_rate(b)[:, None])[:, 0]
     u = np.asarray(u, dtype=float)
     return np.where((u >= 0) & (u <= 1), np.interp(u, GRID, cum / cum[-1]), u)
 
@@ -43,10 +48,7 @@ def warp_jacobian(u, b):
     """(z, dz/db): :func:`warp` at ``u`` and its derivative with respect to b, (len(u), N_WARP),
     exact for the trapezoids and the interpolation ``warp`` computes (0 outside [0, 1])."""
     rate = _rate(b)
-    du = np.diff(GRID)[:, None]
-    both = np.hstack([rate[:, None], rate[:, None] * _BUMPS])      # r and its derivatives
-    cum = np.vstack([np.zeros((1, N_WARP + 1)),
-                     np.cumsum(0.5 * (both[1:] + both[:-1]) * du, axis=0)])
+    cum = _cumulative(np.hstack([rate[:, None], rate[:, None] * _BUMPS]))   # r, dr / db
     g = cum[:, 0] / cum[-1, 0]
     dg = (cum[:, 1:] - g[:, None] * cum[-1, 1:]) / cum[-1, 0]
     u = np.asarray(u, dtype=float)
@@ -63,23 +65,29 @@ def registered(demo: Demonstration, b) -> Demonstration:
                          demo.label, demo.name)
 
 
-def map_warp(log_evidence, prior_mean, prior_sd, start=None, gradient: bool = False):
-    """The MAP warp: b maximising log_evidence(b) + log N(b; prior_mean, diag(prior_sd^2)), by
-    L-BFGS-B from ``start`` (None: the prior's mean); with ``gradient``, log_evidence returns
-    (value, d value / db) (else the optimiser differences it, N_WARP + 1 calls per step).
-    Returns (b, converged); where the optimiser does not converge or the evidence is not
-    finite, the prior's mean (b = 0 under a centred prior: the linear phase), so a bad fit
-    never leaves a NaN in a phase."""
+def _checked_prior(prior_mean, prior_sd):
     mean = np.asarray(prior_mean, dtype=float)
     sd = np.broadcast_to(np.asarray(prior_sd, dtype=float), mean.shape)
     if mean.shape != (N_WARP,) or not (np.all(np.isfinite(mean)) and np.all(sd > 0)):
         raise ValueError(f'the prior over the warp needs a finite mean of shape ({N_WARP},) and '
                          f'positive sds, got {mean!r}, {sd!r}')
+    return mean, sd
+
+
+def map_warp(log_evidence, prior_mean, prior_sd, start=None, gradient: bool = False):
+    """The MAP warp: b maximising log_evidence(b) + log N(b; prior_mean, diag(prior_sd^2)), by
+    L-BFGS-B from ``start`` (None: the prior's mean); with ``gradient``, log_evidence returns
+    (value, d value / db) (else the optimiser differences it, N_WARP + 1 calls per step); a b
+    where it raises ValueError or LinAlgError, or is not finite, is taken as impossible.
+    Returns (b, converged): the optimiser's last b (never worse than its start) unless that is
+    not finite, then the prior's mean (the linear phase under a centred prior), so a bad fit
+    never leaves a NaN in a phase; ``converged`` whether the optimiser says it converged."""
+    mean, sd = _checked_prior(prior_mean, prior_sd)
 
     def cost(b):
         try:
             value, grad = log_evidence(b) if gradient else (log_evidence(b), None)
-        except (ValueError, np.linalg.LinAlgError):     # a warp the evidence cannot take
+        except (ValueError, np.linalg.LinAlgError):
             return (np.inf, np.zeros(N_WARP)) if gradient else np.inf
         value = -(value - 0.5 * np.sum(((b - mean) / sd) ** 2))
         if not gradient:
@@ -91,57 +99,80 @@ def map_warp(log_evidence, prior_mean, prior_sd, start=None, gradient: bool = Fa
     with np.errstate(all='ignore'):
         res = optimize.minimize(cost, mean if start is None else np.asarray(start, dtype=float),
                                 jac=gradient, method='L-BFGS-B', options={'maxiter': MAX_ITER})
-    good = bool(res.success and np.isfinite(res.fun) and np.all(np.isfinite(res.x)))
-    return (res.x if good else mean.copy()), good
+    usable = bool(np.isfinite(res.fun) and np.all(np.isfinite(res.x)))
+    return (res.x if usable else mean.copy()), bool(res.success and usable)
 
 
-def warp_prior(b, weights=None, sd_floor: float = 0.05):
+def laplace(log_evidence, b, prior_mean, prior_sd, step: float = 1e-5):
+    """Laplace's method at the mode ``b`` (:func:`map_warp`) of log_evidence(b) (returning
+    (value, gradient)) + log N(b; prior_mean, diag(prior_sd^2)): (log of its integral over b,
+    the log marginal likelihood with the warp integrated out; the posterior covariance of b,
+    H^-1). H, the negative log posterior's Hessian, from differences of the exact gradient;
+    where it is not positive definite (a mode not reached), the prior's curvature alone.
+    Exact for a Gaussian evidence."""
+    mean, sd = _checked_prior(prior_mean, prior_sd)
+    value, grad = log_evidence(b)
+    H = np.empty((N_WARP, N_WARP))
+    for j, e in enumerate(np.eye(N_WARP)):
+        H[:, j] = -(np.asarray(log_evidence(b + step * e)[1]) - grad) / step
+    H = 0.5 * (H + H.T) + np.diag(sd ** -2.0)
+    try:
+        chol = np.linalg.cholesky(H)
+    except np.linalg.LinAlgError:
+        H = np.diag(sd ** -2.0)
+        chol = np.diag(1.0 / sd)
+    log_prior = (-0.5 * np.sum(((b - mean) / sd) ** 2) - np.sum(np.log(sd))
+                 - 0.5 * N_WARP * np.log(2.0 * np.pi))
+    log_marginal = (value + log_prior + 0.5 * N_WARP * np.log(2.0 * np.pi)
+                    - np.sum(np.log(np.diag(chol))))
+    return float(log_marginal), np.linalg.inv(H)
+
+
+def warp_prior(b, posterior_var=None, sd_floor: float = 0.05):
     """The Gaussian over the warp of a component's members (the M step of eq. 34's prior): the
-    (weighted) mean and sd of each parameter of the MAP warps ``b`` (n, N_WARP), the sd kept
-    above ``sd_floor`` (a few members do not make every warp but theirs impossible)."""
+    mean of their MAP warps ``b`` (n, N_WARP) and the sd of each parameter,
+    sd^2 = mean (b_i - m)^2 + mean of the posterior variances ``posterior_var`` (n, N_WARP;
+    None: 0) (the expected squared deviation, so that the prior does not shrink round by round
+    with the modes it shrinks), kept above ``sd_floor`` (a few members do not make every warp
+    but theirs impossible)."""
     b = np.asarray(b, dtype=float)
-    w = np.ones(len(b)) if weights is None else np.asarray(weights, dtype=float)
-    if b.ndim != 2 or b.shape[1] != N_WARP or len(w) != len(b) or not w.sum() > 0:
-        raise ValueError(f'warps must be (n, {N_WARP}) with n positive weights, got {b.shape} '
-                         f'and {w.shape}')
-    mean = w @ b / w.sum()
-    var = w @ (b - mean) ** 2 / w.sum()
-    return mean, np.sqrt(var + sd_floor ** 2)
+    if b.ndim != 2 or b.shape[1] != N_WARP or not len(b):
+        raise ValueError(f'warps must be (n, {N_WARP}) with n >= 1, got {b.shape}')
+    extra = 0.0 if posterior_var is None else np.mean(posterior_var, axis=0)
+    mean = b.mean(axis=0)
+    return mean, np.sqrt(((b - mean) ** 2).mean(axis=0) + extra + sd_floor ** 2)
 
 
 # Learning each component's Gaussian over b (eq. 34's prior): EM from N(0, START_SD^2 I), a log
 # phase rate that departs from the linear phase by about 30 % at a bump, LEARN_STEPS rounds of
-# every member's MAP warp and the Gaussian of the warps.
+# every member's MAP warp and its Laplace posterior, then the Gaussian.
 START_SD, LEARN_STEPS, SD_FLOOR = 0.3, 3, 0.05
 
 
 def learn_warp_priors(log_evidences, component, n_components: int):
     """Each component's Gaussian over the warp from its members: ``log_evidences`` one function
-    of b per demonstration (log p(D_i | k_i, b) under its component and its gradient, as
-    :func:`map_warp` with ``gradient`` takes them), ``component`` (n,) the
-    component k_i of each. EM over the Gaussian (:func:`map_warp`, :func:`warp_prior`), the
-    demonstrations whose fit does not converge left out of it. Returns (means (K, N_WARP),
-    sds (K, N_WARP), converged (n,) bool); a component with no converged member keeps
-    N(0, START_SD^2 I)."""
+    of b per demonstration, log p(D_i | k_i, b) under its component and its gradient (as
+    :func:`map_warp` with ``gradient`` takes them), ``component`` (n,) the component k_i of
+    each. EM over the Gaussian: each member's MAP warp and posterior variance (:func:`laplace`)
+    under the current Gaussian, then :func:`warp_prior` of the members whose fit converged.
+    Returns (means (K, N_WARP), sds (K, N_WARP), converged (n,) bool of the last round); a
+    component none of whose fits converged keeps its last Gaussian (at first N(0, START_SD^2 I))."""
     component = np.asarray(component, dtype=int)
+    if len(log_evidences) != len(component):
+        raise ValueError(f'{len(log_evidences)} evidences for {len(component)} components')
     means = np.zeros((n_components, N_WARP))
     sds = np.full((n_components, N_WARP), START_SD)
-    good = np.zeros(len(component), dtype=bool)
     b = np.zeros((len(component), N_WARP))
+    var = np.zeros((len(component), N_WARP))
+    good = np.zeros(len(component), dtype=bool)
     for _ in range(LEARN_STEPS):
-        # Each fit from the last step's warp: the prior moved little, so did its MAP.
-        fits = [map_warp(f, means[k], sds[k], start, gradient=True) for f, k, start in
-                zip(log_evidences, component, b)]
-        b = np.array([x for x, _ in fits]).reshape(-1, N_WARP)
-        good = np.array([ok for _, ok in fits], dtype=bool)
+        for i, (f, k) in enumerate(zip(log_evidences, component)):
+            # From the last round's warp: the prior moved little, so did its MAP.
+            b[i], good[i] = map_warp(f, means[k], sds[k], b[i], gradient=True)
+            if good[i]:
+                var[i] = np.diag(laplace(f, b[i], means[k], sds[k])[1])
         for k in range(n_components):
             mine = good & (component == k)
             if mine.any():
-                means[k], sds[k] = warp_prior(b[mine], sd_floor=SD_FLOOR)
+                means[k], sds[k] = warp_prior(b[mine], var[mine], SD_FLOOR)
     return means, sds, good
-
-
-def warp_log_density(b, mean, sd) -> float:
-    """log N(b; mean, diag(sd^2))."""
-    return float(-0.5 * np.sum(((b - mean) / sd) ** 2) - np.sum(np.log(sd))
-                 - 0.5 * len(mean) * np.log(2.0 * np.pi))

@@ -85,8 +85,9 @@ def posterior_summary(estimator, t_now: float) -> PosteriorSummary:
 
 def end_summary(estimator, t_end: float) -> PosteriorSummary:
     """The summary once the movement's end is known (``t_end`` s after onset): the component
-    posterior with the phase 1 there (OnlineEstimator.end_posterior, the batch posterior with
-    the phase known), alpha = 1 / t_end."""
+    posterior with the phase 1 there (OnlineEstimator.end_posterior: the batch posterior with
+    the phase known, each component at its own warp where the model has them),
+    alpha = 1 / t_end."""
     p = estimator.end_posterior(t_end)
     return PosteriorSummary(probabilities=p, component=int(np.argmax(p)), alpha=1.0 / t_end,
                             phase=1.0)

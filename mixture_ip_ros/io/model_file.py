@@ -27,7 +27,7 @@ from mixture_ip_ros.core.demonstration import Layout
 from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.novelty import NoveltyThresholds
 from mixture_ip_ros.core.patterns import translation_groups
-from mixture_ip_ros.core.warp import N_WARP
+from mixture_ip_ros.core.warp import N_WARP, WIDTH
 from mixture_ip_ros.io.files import write_atomic
 
 FORMAT = 'mixture_ip_ros/mixture-iprompt'
@@ -38,6 +38,8 @@ _PARAMS = ('n_components', 'n_basis', 'method', 'ridge', 'prior_strength', 'prio
            'noise_var', 'speed_weight', 'translation', 'smoothing')
 _ARRAYS = ('weights', 'means', 'covariances', 'noise_var', 'alpha_mean', 'alpha_std',
            'prior_cov', 'noise_time')
+# The warp family a file's warp_mean / warp_sd are parameters of (core.warp).
+_WARP_FAMILY = {'log_rate_bumps': N_WARP, 'bump_width': WIDTH}
 
 
 class ModelFileError(ValueError):
@@ -99,6 +101,7 @@ def save_model(path, model: MixtureIProMP, *, layout: Layout = None, observed_na
     arrays = {name: np.asarray(getattr(model, name + '_'), dtype=float) for name in _ARRAYS}
     if getattr(model, 'warp_mean_', None) is not None:      # the phase that bends, learned
         arrays.update(warp_mean=model.warp_mean_, warp_sd=model.warp_sd_)
+        meta['warp'] = _WARP_FAMILY
         meta['warp_failed'] = [_jsonable_param(n) for n in model.warp_failed_]
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -212,10 +215,16 @@ def load_model(path, *, observed_names=None, controlled_names=None):
         fail(f'invalid fitted smoothing or offsets ({e})')
     model.classes_ = meta.get('classes')
     model.warp_mean_ = model.warp_sd_ = None        # files without them: the linear phase
-    model.warp_failed_ = list(meta.get('warp_failed') or [])
+    failed = meta.get('warp_failed', [])
+    if not isinstance(failed, list) or not all(isinstance(n, (str, int)) for n in failed):
+        fail(f'warp_failed must list demonstration names or indices, got {failed!r}')
+    model.warp_failed_ = failed
     if ('warp_mean' in data) != ('warp_sd' in data):
         fail('warp_mean and warp_sd go together')
     if 'warp_mean' in data:
+        if meta.get('warp') != _WARP_FAMILY:
+            fail(f"the phase warp is of another family ({meta.get('warp')!r}; this package's "
+                 f'is {_WARP_FAMILY})')
         mean, sd = data['warp_mean'], data['warp_sd']
         if (mean.shape != (K, N_WARP) or sd.shape != (K, N_WARP)
                 or not np.all(np.isfinite(mean)) or not np.all(np.isfinite(sd) & (sd > 0))):
