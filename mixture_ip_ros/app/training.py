@@ -229,8 +229,8 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
     with stages('phase warps'):
         model.fit_warps(demos)
     if model.warp_failed_:
-        logger.warning('the phase warp of %d demonstration(s) did not converge; they keep the '
-                       'linear phase: %s', len(model.warp_failed_),
+        logger.warning('the phase warp of %d demonstration(s) did not converge; they are '
+                       'left out of the Gaussian over the warp: %s', len(model.warp_failed_),
                        ', '.join(map(str, model.warp_failed_)))
     info['n_components'] = int(n_components)
     info['prior_scale'] = float(model.prior_scale)

@@ -183,7 +183,7 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
                   'fractions': 'part of the recording observed (from its first sample)',
                   'given_end': 'the whole recording fed to the online estimator (phase '
                                'unknown), then its end time given, where the phase is 1, '
-                               'each component at its MAP warp of the recording '
+                               "each component's warp integrated out "
                                '(OnlineEstimator.end_posterior); beside the same without '
                                'the end, the "1" of the phase-unknown curves',
                   'noise_var': 'g^2'},
