@@ -14,9 +14,10 @@ from scipy.stats import multivariate_normal, norm
 from mixture_ip_ros.core.basis import GaussianBasis
 from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.core.mixture import MixtureIProMP
+from mixture_ip_ros.core.noise import decimated_rows
 from mixture_ip_ros.core.promp import observation_stats, weight_posterior
-from mixture_ip_ros.core.warp import (CENTERS, N_WARP, SD_FLOOR, START_SD, WIDTH, laplace,
-                                      learn_warp_priors, map_warp, registered, warp,
+from mixture_ip_ros.core.warp import (CENTERS, FLAT, N_WARP, SD_FLOOR, START_SD, WIDTH,
+                                      laplace, learn_warp_priors, map_warp, registered, warp,
                                       warp_jacobian, warp_prior)
 
 
@@ -284,6 +285,29 @@ def test_warped_posterior_integrates_each_components_warp_out(warped_mixture):
     assert np.allclose(p, np.exp(log_joint - logsumexp(log_joint)), atol=1e-9)
 
 
+def test_fit_warps_reads_each_recording_as_the_estimator_does(warped_mixture, monkeypatch):
+    """At samples no closer than the estimator's decimation (the recordings here are at 50 Hz
+    with white residuals, min_interval 0.05 s), under its component's weights made once for
+    every member (the same evidence as made per recording)."""
+    model, demos = warped_mixture
+    real = MixtureIProMP._warp_evidence
+    seen = []
+
+    def spy(self, k, u, Y, interval, prior=None):
+        seen.append((len(u), interval))
+        alone = real(self, k, u, Y, interval)
+        shared = real(self, k, u, Y, interval, prior)
+        b = np.linspace(-0.3, 0.3, N_WARP)
+        assert alone(b)[0] == shared(b)[0] and np.array_equal(alone(b)[1], shared(b)[1])
+        return shared
+    monkeypatch.setattr(MixtureIProMP, '_warp_evidence', spy)
+    copy.copy(model).fit_warps(demos)
+    assert model.warp_spacing < 0.05
+    assert seen == [(len(decimated_rows(d.t, 0.05)), 0.05) for d in demos]
+    with pytest.raises(ValueError, match='min_interval must be'):
+        copy.copy(model).fit_warps(demos, min_interval=-1.0)
+
+
 def test_fit_warps_needs_the_demonstrations_the_model_was_fitted_to(warped_mixture):
     model, demos = warped_mixture
     with pytest.raises(ValueError, match='fit_warps needs the 28 Demonstrations'):
@@ -305,9 +329,9 @@ def test_a_warp_that_does_not_converge_is_named_and_left_out(warped_mixture, mon
     real = MixtureIProMP._warp_evidence
     calls = []
 
-    def failing_for_rec4(self, k, u, Y, interval):
+    def failing_for_rec4(self, *args):
         calls.append(len(calls))
-        evidence = real(self, k, u, Y, interval)
+        evidence = real(self, *args)
         return (lambda b: (np.nan, np.zeros(N_WARP))) if len(calls) == 5 else evidence
     monkeypatch.setattr(MixtureIProMP, '_warp_evidence', failing_for_rec4)
     refit = copy.copy(model).fit_warps(named)
@@ -350,6 +374,22 @@ def test_map_warp_treats_a_warp_the_evidence_refuses_as_impossible():
         return -0.5 * np.sum((b - 1.0) ** 2), -(b - 1.0)
     b, good = map_warp(evidence, np.zeros(N_WARP), 1.0, gradient=True)
     assert np.all(np.isfinite(b)) and b[0] <= 0.5
+
+
+def test_map_warp_takes_a_stop_where_the_posterior_is_flat_as_converged(monkeypatch):
+    """L-BFGS-B's line search may give up at the mode (rounding, kinks between GRID points):
+    a gradient below FLAT nats per prior sd is a mode; a steep one is not."""
+    from scipy import optimize
+    from mixture_ip_ros.core import warp as warp_module
+    sd = np.full(N_WARP, 0.2)
+    for jac, expected in ((np.full(N_WARP, 0.9 * FLAT / 0.2), True),
+                          (np.full(N_WARP, 1.1 * FLAT / 0.2), False)):
+        stopped = optimize.OptimizeResult(x=np.full(N_WARP, 0.1), fun=3.0, jac=jac,
+                                          success=False, message='ABNORMAL: ')
+        monkeypatch.setattr(warp_module.optimize, 'minimize', lambda *a, **k: stopped)
+        b, good = map_warp(lambda x: (0.0, np.zeros(N_WARP)), np.zeros(N_WARP), sd,
+                           gradient=True)
+        assert good is expected and np.array_equal(b, stopped.x)
 
 
 def test_end_posterior_falls_back_to_the_linear_phase_if_every_warp_fails(warped_mixture,

@@ -28,10 +28,10 @@ from .patterns import PatternMixture, PatternSpace, offset_operators, translatio
 from .interaction import condition_on_observed, trajectory_distribution
 from .phase import (alpha_log_density, alpha_m_step, alpha_penalty, alpha_prior_std,
                     timing_variance)
-from .promp import (ObservationStats, covariance_penalty, expected_sq_residual, log_evidence,
-                    empirical_bayes_smoothing, observation_stats, penalised_weights,
-                    stack_stats, start_ridge, weight_posterior)
-from .warp import N_WARP, laplace, learn_warp_priors, map_warp, warp_jacobian
+from .promp import (ObservationStats, cho_inverse, covariance_penalty, expected_sq_residual,
+                    log_evidence, empirical_bayes_smoothing, feature_stats, observation_stats,
+                    penalised_weights, stack_stats, start_ridge, weight_posterior)
+from .warp import N_WARP, WarpAt, laplace, learn_warp_priors, map_warp
 
 
 class Prepared(NamedTuple):
@@ -461,12 +461,15 @@ class MixtureIProMP:
         return np.exp(lp - logsumexp(lp))
 
     # ------------------------------------------------------------------ the phase that bends
-    def fit_warps(self, demonstrations):
+    def fit_warps(self, demonstrations, min_interval: float = 0.05):
         """Learn each component's Gaussian over a monotone phase warp (the thesis's eq. 34,
         core.warp): each demonstration's observed agent at phase z = g(t / T; b), b its MAP
         under its most probable component (``resp_``), the Gaussian of each component learned
         from its members' warps by EM (core.warp.learn_warp_priors). ``demonstrations``: the
-        ones the model was fitted to, in that order. Fitted: ``warp_mean_``, ``warp_sd_``
+        ones the model was fitted to, in that order; each read at samples at least
+        ``min_interval`` s apart (the online estimator's decimation: a warp is learned from
+        the evidence it will be used on) and as far apart as its residuals stay correlated
+        (:attr:`warp_spacing`). Fitted: ``warp_mean_``, ``warp_sd_``
         (K, core.warp.N_WARP) and ``warp_failed_``, the names (else indices) of the
         demonstrations whose fit did not converge (left out of the Gaussian). A model without
         them keeps the linear phase everywhere; with them, the component posterior once the
@@ -481,13 +484,18 @@ class MixtureIProMP:
         if len(demos) != len(self.resp_) or not all(isinstance(d, Demonstration) for d in demos):
             raise ValueError(f'fit_warps needs the {len(self.resp_)} Demonstrations the model '
                              f'was fitted to, got {len(demos)}')
+        if not (np.isfinite(min_interval) and min_interval >= 0):
+            raise ValueError(f'min_interval must be a number of seconds >= 0, got '
+                             f'{min_interval!r}')
         component = np.argmax(self.resp_, axis=1)
-        interval = self.warp_spacing
+        interval = max(self.warp_spacing, float(min_interval))
+        priors = [self._observed_prior(k) for k in range(self.n_components)]
         evidences = []
         for d, k in zip(demos, component):
             rows = np.flatnonzero(~np.isnan(d.observed).all(axis=1))
             rows = rows[decimated_rows(d.t[rows], interval)]
-            evidences.append(self._warp_evidence(k, d.phase[rows], d.observed[rows], interval))
+            evidences.append(self._warp_evidence(k, d.phase[rows], d.observed[rows], interval,
+                                                 priors[k]))
         self.warp_mean_, self.warp_sd_, good = learn_warp_priors(evidences, component,
                                                                  self.n_components)
         self.warp_failed_ = [d.name if d.name else i for i, d in enumerate(demos)
@@ -503,29 +511,43 @@ class MixtureIProMP:
         self._check_fitted()
         return float(np.max(self.noise_time_[:self.n_observed_], initial=0.0))
 
-    def _warp_evidence(self, k, u, Y_obs, interval):
+    def _observed_prior(self, k):
+        """Component k's Gaussian over the observed agent's weights as its warp evidence takes
+        it: (mean, Cholesky factor, precision), computed once for all of k's recordings."""
+        do = self.n_observed_ * self.n_basis
+        chol = linalg.cho_factor(self.covariances_[k][:do, :do], lower=True)
+        return self.means_[k][:do], chol, cho_inverse(chol)
+
+    def _warp_evidence(self, k, u, Y_obs, interval, prior=None):
         """b -> (log p(D | k, b), its gradient): the observed agent at relative times ``u``
-        sampled at least ``interval`` s apart (eq. 21), at phases z = g(u; b). The gradient is
+        sampled at least ``interval`` s apart (eq. 21), at phases z = g(u; b), under k's
+        weights (``prior``: :meth:`_observed_prior`, None: made here). The gradient is
         the posterior expectation of the complete data's: d log p(D) / d psi_i = sum_j
         ((y_ij - psi_i^T m_j) m_j - S_j psi_i) / sigma_j^2 (m_j, S_j the posterior mean and
-        covariance of DOF j's weights), through psi's derivative and dz / db (core.warp)."""
-        do, N = self.n_observed_ * self.n_basis, self.n_basis
-        chol = linalg.cho_factor(self.covariances_[k][:do, :do], lower=True)
-        mean, noise = self.means_[k][:do], self._observed_noise(k, interval)
+        covariance of DOF j's weights), through psi's derivative and dz / db (core.warp).
+        The last b's answer is kept: Laplace's method asks again at the mode the optimiser
+        ended on."""
+        P, N = self.n_observed_, self.n_basis
+        mean, chol, prec = self._observed_prior(k) if prior is None else prior
+        noise = self._observed_noise(k, interval)
         Y = np.nan_to_num(Y_obs)
         seen = ~np.isnan(Y_obs)
+        weight = seen / noise                                     # (m, P): 0 where missing
+        at = WarpAt(u)
+        last = [None, None]
 
         def evidence(b):
-            z, dz = warp_jacobian(u, b)
-            m, S, ll = weight_posterior(observation_stats(self.basis_, z, Y_obs), mean, chol,
-                                        noise)
+            if last[0] is not None and np.array_equal(b, last[0]):
+                return last[1]
+            z, dz = at(b)
             psi, dpsi = self.basis_.evaluate(z, order=1)
-            dll = np.zeros_like(psi)
-            for j in range(self.n_observed_):
-                mj, Sj = m[j * N:(j + 1) * N], S[j * N:(j + 1) * N, j * N:(j + 1) * N]
-                resid = np.where(seen[:, j], Y[:, j] - psi @ mj, 0.0)
-                dll += (resid[:, None] * mj - seen[:, [j]] * (psi @ Sj)) / noise[j]
-            return ll, dz.T @ np.einsum('in,in->i', dpsi, dll)
+            m, S, ll = weight_posterior(feature_stats(psi, Y_obs), mean, chol, noise, prec)
+            M = m.reshape(P, N)
+            blocks = S.reshape(P, N, P, N)[np.arange(P), :, np.arange(P)]     # S_j, (P, N, N)
+            dll = (((Y - psi @ M.T) * weight) @ M
+                   - np.einsum('ij,jik->ik', weight, psi @ blocks))
+            last[:] = np.array(b, dtype=float), (ll, dz.T @ np.einsum('in,in->i', dpsi, dll))
+            return last[1]
         return evidence
 
     def warped_component_posterior(self, u, Y_obs, alpha=None, interval=None):

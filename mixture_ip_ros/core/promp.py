@@ -42,8 +42,13 @@ def observation_stats(basis: GaussianBasis, z, Y) -> ObservationStats:
     Y = np.asarray(Y, dtype=float)
     if Y.ndim != 2 or Y.shape[0] != z.shape[0]:
         raise ValueError(f'Y must have shape (len(z), dofs) = ({z.shape[0]}, D), got {Y.shape}')
-    psi = basis(z)
-    D, N = Y.shape[1], basis.n_basis
+    return feature_stats(basis(z), Y)
+
+
+def feature_stats(psi, Y) -> ObservationStats:
+    """:func:`observation_stats` from the features psi(z) (T, n_basis) already evaluated (a
+    caller that needs psi for more, e.g. a gradient through z, evaluates the basis once)."""
+    D, N = Y.shape[1], psi.shape[1]
     observed = ~np.isnan(Y)
     Y0 = np.where(observed, Y, 0.0)
     # DOFs observed at the same samples share A_j^T A_j (a demonstration misses whole rows of
@@ -185,15 +190,18 @@ def block_diag_info(stats: ObservationStats, noise_var: np.ndarray):
     return info, (stats.b / noise_var[:, None]).ravel()
 
 
-def weight_posterior(stats: ObservationStats, mean, cov_chol, noise_var):
+def weight_posterior(stats: ObservationStats, mean, cov_chol, noise_var, prior_prec=None):
     """Eqs. 27-28 and the marginal likelihood of eq. 21 for one trajectory.
 
     ``cov_chol`` is the lower Cholesky factor of the prior covariance (from scipy cho_factor
-    with lower=True, i.e. a tuple). Returns (posterior mean, posterior covariance, log p(D)).
+    with lower=True, i.e. a tuple); ``prior_prec`` its inverse where the caller keeps it for
+    many trajectories (None: from the factor). Returns (posterior mean, posterior covariance,
+    log p(D)).
     """
     d = mean.shape[0]
     info, eta = block_diag_info(stats, noise_var)
-    prior_prec = cho_inverse(cov_chol)
+    if prior_prec is None:
+        prior_prec = cho_inverse(cov_chol)
     prec = prior_prec + info
     prec_chol = linalg.cho_factor(prec, lower=True)
     post_cov = linalg.cho_solve(prec_chol, np.eye(d))

@@ -19,7 +19,10 @@ CENTERS = np.linspace(0.0, 1.0, N_WARP)
 WIDTH = 1.0 / (N_WARP - 1)
 GRID = np.linspace(0.0, 1.0, 513)            # where g is integrated (trapezoids)
 MAX_ITER = 200                               # L-BFGS-B iterations of a MAP warp (a fit takes 10-40)
+FLAT = 0.01                                  # nats: a MAP warp's gradient times the prior's sd
 _BUMPS = np.exp(-0.5 * ((GRID[:, None] - CENTERS) / WIDTH) ** 2)
+_ONE_BUMPS = np.hstack([np.ones((len(GRID), 1)), _BUMPS])        # r and dr / db over r
+_STEP = GRID[1] - GRID[0]
 
 
 def _rate(b):
@@ -31,31 +34,51 @@ def _rate(b):
 
 
 def _cumulative(f):
-    """int_0^u f over GRID by trapezoids, for each column of ``f`` (len(GRID), m)."""
-    steps = 0.5 * (f[1:] + f[:-1]) * np.diff(GRID)[:, None]
-    return np.vstack([np.zeros((1, f.shape[1])), np.cumsum(steps, axis=0)])
+    """int_0^u f over GRID by trapezoids, for each column of ``f`` (len(GRID), m): a running
+    sum of nonnegative steps for nonnegative f, so monotone in floating point too."""
+    out = np.empty_like(f)
+    out[0] = 0.0
+    np.cumsum((0.5 * _STEP) * (f[1:] + f[:-1]), axis=0, out=out[1:])
+    return out
 
 
 def warp(u, b):
     """z = g(u; b) at relative times ``u``; u outside [0, 1] is kept (before the onset, after
     the end, where the linear phase's own extrapolation is what a ProMP clamps)."""
-    cum = _cumulative(_rate(b)[:, None])[:, 0]
     u = np.asarray(u, dtype=float)
-    return np.where((u >= 0) & (u <= 1), np.interp(u, GRID, cum / cum[-1]), u)
+    return WarpAt(u.ravel())(b)[0].reshape(u.shape)
+
+
+class WarpAt:
+    """:func:`warp_jacobian` at fixed relative times ``u`` (1-D) for many b (an optimiser's):
+    where each u falls on GRID is found once."""
+
+    def __init__(self, u):
+        u = np.asarray(u, dtype=float)
+        self.u, self.inside = u, (u >= 0) & (u <= 1)
+        at = np.clip(u, 0.0, 1.0) * (len(GRID) - 1)
+        self.lo = at.astype(int)                     # u = 1: the padded point past GRID's last
+        self.frac = (at - self.lo)[:, None]
+
+    def __call__(self, b):
+        """(z, dz/db): g(u; b) and its derivative with respect to b, (len(u), N_WARP), exact for
+        the trapezoids and the linear interpolation between GRID's points (0 outside [0, 1]);
+        g(0) = 0 and g(1) = 1 exactly, and g is monotone in floating point too."""
+        cum = _cumulative(_rate(b)[:, None] * _ONE_BUMPS)          # int r, int dr / db
+        both = np.empty((len(GRID) + 1, N_WARP + 1))                # g, dg / db; then padded
+        both[:-1, :1] = cum[:, :1] / cum[-1, 0]
+        both[:-1, 1:] = (cum[:, 1:] - both[:-1, :1] * cum[-1, 1:]) / cum[-1, 0]
+        both[-1] = both[-2]
+        lo, hi = both[self.lo], both[self.lo + 1]
+        at = lo + self.frac * (hi - lo)
+        z = np.minimum(at[:, 0], hi[:, 0])           # rounding never steps past the next point
+        return np.where(self.inside, z, self.u), np.where(self.inside[:, None], at[:, 1:], 0.0)
 
 
 def warp_jacobian(u, b):
     """(z, dz/db): :func:`warp` at ``u`` and its derivative with respect to b, (len(u), N_WARP),
     exact for the trapezoids and the interpolation ``warp`` computes (0 outside [0, 1])."""
-    rate = _rate(b)
-    cum = _cumulative(np.hstack([rate[:, None], rate[:, None] * _BUMPS]))   # r, dr / db
-    g = cum[:, 0] / cum[-1, 0]
-    dg = (cum[:, 1:] - g[:, None] * cum[-1, 1:]) / cum[-1, 0]
-    u = np.asarray(u, dtype=float)
-    inside = (u >= 0) & (u <= 1)
-    z = np.where(inside, np.interp(u, GRID, g), u)
-    J = np.stack([np.interp(u, GRID, dg[:, j]) for j in range(N_WARP)], axis=1)
-    return z, np.where(inside[:, None], J, 0.0)
+    return WarpAt(u)(b)
 
 
 def registered(demo: Demonstration, b) -> Demonstration:
@@ -81,7 +104,9 @@ def map_warp(log_evidence, prior_mean, prior_sd, start=None, gradient: bool = Fa
     where it raises ValueError or LinAlgError, or is not finite, is taken as impossible.
     Returns (b, converged): the optimiser's last b (never worse than its start) unless that is
     not finite, then the prior's mean (the linear phase under a centred prior), so a bad fit
-    never leaves a NaN in a phase; ``converged`` whether the optimiser says it converged."""
+    never leaves a NaN in a phase; ``converged`` whether the optimiser says it converged or
+    stopped where the log posterior is flat (each gradient component times the prior's sd at
+    most ``FLAT`` nats)."""
     mean, sd = _checked_prior(prior_mean, prior_sd)
 
     def cost(b):
@@ -100,7 +125,11 @@ def map_warp(log_evidence, prior_mean, prior_sd, start=None, gradient: bool = Fa
         res = optimize.minimize(cost, mean if start is None else np.asarray(start, dtype=float),
                                 jac=gradient, method='L-BFGS-B', options={'maxiter': MAX_ITER})
     usable = bool(np.isfinite(res.fun) and np.all(np.isfinite(res.x)))
-    return (res.x if usable else mean.copy()), bool(res.success and usable)
+    # L-BFGS-B's line search can stop where rounding, not the objective, blocks progress (g
+    # interpolates GRID linearly, so the evidence has kinks): a b where a step of one prior sd
+    # changes the log posterior by less than FLAT nats to first order is a mode all the same.
+    flat = bool(np.all(np.isfinite(res.jac)) and np.max(np.abs(res.jac) * sd) <= FLAT)
+    return (res.x if usable else mean.copy()), bool((res.success or flat) and usable)
 
 
 def laplace(log_evidence, b, prior_mean, prior_sd, step: float = 1e-5):
