@@ -227,7 +227,8 @@ def end_section(er) -> list:
         return []
     cases = [(v, c) for v in versions for c in ('clean', 'tempo') if c in er[v]]
     names = {'clean': 'as recorded', 'tempo': 'pace changed'}
-    methods = [m for m in er[versions[0]]['clean'] if m not in ('k', 'warp_fits_not_converged')]
+    methods = [m for m in er[versions[0]]['clean']
+               if m not in ('k', 'warp_fits_not_converged', 'chose_warped')]
     L = ['## Recognised once the end is known: the phase that bends (`bench/end_recognition.py`)',
          '', "The interactions evaluation's 5 stratified folds; each held-out recording played "
          "to the estimator, then its end given (the observer's 'end' event: "
@@ -245,6 +246,9 @@ def end_section(er) -> list:
           for m in methods]
     L.append('| K per fold | ' + ' | '.join(', '.join(map(str, er[v][c]['k'])) for v, c in cases)
              + ' |')
+    if all('chose_warped' in er[v][c] for v, c in cases):
+        L.append('| models given the warps by training (held-out choice) | '
+                 + ' | '.join(er[v][c]['chose_warped'] for v, c in cases) + ' |')
     return L + ['']
 
 

@@ -308,6 +308,37 @@ def test_fit_warps_reads_each_recording_as_the_estimator_does(warped_mixture, mo
         copy.copy(model).fit_warps(demos, min_interval=-1.0)
 
 
+def test_warp_gains_say_where_a_warp_predicts_held_out_recordings_better():
+    """Recordings held out from the model: made at warps of spread 0.3, a warp predicts them
+    better; made at the linear phase, the warp's freedom only spreads the prediction. Each gain
+    is Laplace's marginal at N(0, START_SD^2 I) less the evidence at b = 0 under the component
+    the linear phase finds most probable."""
+    for spread, sign in ((0.3, 1.0), (0.0, -1.0)):
+        demos = recordings_at_warps(spread, seed=11)
+        held_out = recordings_at_warps(spread, seed=12)
+        model = MixtureIProMP(n_components=2, n_basis=8).fit(demos)
+        gains = model.warp_gains(held_out)
+        assert sign * gains.mean() > 0.5
+        d = held_out[1]
+        rows = decimated_rows(d.t, 0.05)
+        k = int(np.argmax(model.component_posterior(d.phase[rows], d.observed[rows],
+                                                     1 / d.duration)))
+        evidence = model._warp_evidence(k, d.phase[rows], d.observed[rows], 0.05)
+        start = np.zeros(N_WARP), np.full(N_WARP, START_SD)
+        b = map_warp(evidence, *start, gradient=True)[0]
+        assert np.isclose(gains[1], laplace(evidence, b, *start)[0] - evidence(start[0])[0])
+
+
+def test_training_keeps_the_warps_only_where_they_predict_held_out_recordings_better():
+    from mixture_ip_ros.app.training import train
+    for spread, chosen in ((0.3, 'warped'), (0.0, 'linear')):
+        model, info = train(recordings_at_warps(spread, seed=13), n_components=2, n_basis=8)
+        assert info['phase']['chosen'] == chosen
+        assert (info['phase']['held_out_gain'] > 0) == (chosen == 'warped')
+        assert (model.warp_mean_ is not None) == (chosen == 'warped')
+        assert ('phase warps' in info['seconds']) == (chosen == 'warped')
+
+
 def test_fit_warps_needs_the_demonstrations_the_model_was_fitted_to(warped_mixture):
     model, demos = warped_mixture
     with pytest.raises(ValueError, match='fit_warps needs the 28 Demonstrations'):

@@ -226,8 +226,21 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
         model = MixtureIProMP(n_components=n_components, **params)
         regression = model.method == 'regression' and prepared is not None
         model.fit(prepared if regression else demos, labels=labels)
-    with stages('phase warps'):
-        model.fit_warps(demos)
+    # The phase warps where they predict held-out recordings better than the linear phase;
+    # EM's demonstrations may lack a whole agent, which the folds' regression fits cannot
+    # take: EM keeps them.
+    if params.get('method') != 'em':
+        with stages('phase choice'):
+            gain = _held_out_warp_gain(demos, data(), n_components, labels, n_folds,
+                                       {**params, 'method': 'regression'}, n_jobs)
+        info['phase'] = {'held_out_gain': gain,
+                         'chosen': 'warped' if gain is None or gain > 0 else 'linear'}
+        if gain is not None:
+            logger.info('phase: %s (a warp predicts held-out recordings %+.2f nats each against '
+                        'the linear phase)', info['phase']['chosen'], gain)
+    if info.get('phase', {}).get('chosen', 'warped') == 'warped':
+        with stages('phase warps'):
+            model.fit_warps(demos)
     if model.warp_failed_:
         logger.warning('the phase warp of %d demonstration(s) did not converge; they are '
                        'left out of the Gaussian over the warp: %s', len(model.warp_failed_),
@@ -343,15 +356,11 @@ def _calibrated_floor(demos, K, n_folds, progress, prior_scales, params, n_jobs=
     return float(curves[which]['prior_scale'][0])
 
 
-def _calibrated_speed_weight(demos, data, n_components, labels, n_folds, params, n_jobs=None):
-    """The speed weight (core.online.SPEED_WEIGHTS) whose tempered phase posterior predicts
-    held-out demonstrations' speeds best from their beginnings (core.online.speed_log_scores,
-    summed over ``n_folds`` folds on ``n_jobs`` threads; ties: the larger weight, nearer eq.
-    16), and the mean score of each weight; (1, None) where no fold can hold the model. The
-    fits are regression fits of the folds of ``data`` (prepare_for_cv of ``demos``), as the
-    floor's are."""
-    if len(demos) < 2:
-        return 1.0, None
+def _held_out_scores(demos, data, n_components, labels, n_folds, params, score, n_jobs=None):
+    """``score(model, held_out_demonstrations)`` of each of ``n_folds`` folds, the model a
+    regression fit of the other folds of ``data`` (prepare_for_cv of ``demos``), as the floor's
+    are, on ``n_jobs`` threads, in the folds' order; folds that cannot hold the model (too few
+    demonstrations, or not every label) are left out."""
     fold = cv_folds(len(demos), n_folds, 0)
 
     def one_fold(f):
@@ -359,18 +368,40 @@ def _calibrated_speed_weight(demos, data, n_components, labels, n_folds, params,
         fit_labels = None if labels is None else [labels[i] for i in train_i]
         if len(train_i) < n_components or (fit_labels is not None
                                            and len(set(fit_labels)) != n_components):
-            return np.zeros(len(SPEED_WEIGHTS)), 0
+            return None
         model = MixtureIProMP(n_components=n_components, **params).fit(
             data.take(train_i), labels=fit_labels)
-        return speed_log_scores(model, [demos[i] for i in test_i])
+        return score(model, [demos[i] for i in test_i])
+    return [r for r in map_threads(one_fold, range(fold.max() + 1), n_jobs) if r is not None]
+
+
+def _calibrated_speed_weight(demos, data, n_components, labels, n_folds, params, n_jobs=None):
+    """The speed weight (core.online.SPEED_WEIGHTS) whose tempered phase posterior predicts
+    held-out demonstrations' speeds best from their beginnings (core.online.speed_log_scores,
+    summed over ``n_folds`` folds: :func:`_held_out_scores`; ties: the larger weight, nearer
+    eq. 16), and the mean score of each weight; (1, None) where no fold can hold the model."""
+    if len(demos) < 2:
+        return 1.0, None
     total, n = np.zeros(len(SPEED_WEIGHTS)), 0
-    for score, m in map_threads(one_fold, range(fold.max() + 1), n_jobs):
-        total += score              # in the folds' order, whatever the threads
+    for score, m in _held_out_scores(demos, data, n_components, labels, n_folds, params,
+                                     speed_log_scores, n_jobs):
+        total += score
         n += m
     if n == 0:
         return 1.0, None
     best = first_best(total)              # SPEED_WEIGHTS start at eq. 16's weight, 1
     return SPEED_WEIGHTS[best], {f'{w:g}': float(t / n) for w, t in zip(SPEED_WEIGHTS, total)}
+
+
+def _held_out_warp_gain(demos, data, n_components, labels, n_folds, params, n_jobs=None):
+    """How much better the phase warps predict held-out demonstrations than the linear phase:
+    the mean of MixtureIProMP.warp_gains (nats per demonstration) over ``n_folds`` folds
+    (:func:`_held_out_scores`); None where no fold can hold the model."""
+    if len(demos) < 2:
+        return None
+    gains = _held_out_scores(demos, data, n_components, labels, n_folds, params,
+                             lambda model, held_out: model.warp_gains(held_out), n_jobs)
+    return float(np.mean(np.concatenate(gains))) if gains else None
 
 
 def _offset_progress(progress, offset, total):

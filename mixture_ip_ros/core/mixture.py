@@ -31,7 +31,7 @@ from .phase import (alpha_log_density, alpha_m_step, alpha_penalty, alpha_prior_
 from .promp import (ObservationStats, cho_inverse, covariance_penalty, expected_sq_residual,
                     log_evidence, empirical_bayes_smoothing, feature_stats, observation_stats,
                     penalised_weights, stack_stats, start_ridge, weight_posterior)
-from .warp import N_WARP, WarpAt, laplace, learn_warp_priors, map_warp
+from .warp import N_WARP, START_SD, WarpAt, laplace, learn_warp_priors, map_warp
 
 
 class Prepared(NamedTuple):
@@ -501,6 +501,35 @@ class MixtureIProMP:
         self.warp_failed_ = [d.name if d.name else i for i, d in enumerate(demos)
                              if not good[i]]
         return self
+
+    def warp_gains(self, demonstrations, min_interval: float = 0.05) -> np.ndarray:
+        """How much better each demonstration's observed agent is predicted with a phase warp
+        than at the linear phase (nats; positive: the warp predicts it better), for
+        demonstrations held out from this model: log int p(D | k, b) N(b; 0, START_SD^2 I) db
+        (Laplace, core.warp) - log p(D | k, b = 0), under k, its most probable component at the
+        linear phase, read as :meth:`fit_warps` reads a recording. The warp at the Gaussian
+        :meth:`fit_warps` starts from: the criterion needs no warps learned, and so no
+        learning per fold. Training's held-out choice of the phase."""
+        self._check_fitted()
+        demos = list(demonstrations)
+        interval = max(self.warp_spacing, float(min_interval))
+        priors = [self._observed_prior(k) for k in range(self.n_components)]
+        start = np.zeros(N_WARP), np.full(N_WARP, START_SD)
+        gains = np.empty(len(demos))
+        for i, d in enumerate(demos):
+            rows = np.flatnonzero(~np.isnan(d.observed).all(axis=1))
+            rows = rows[decimated_rows(d.t[rows], interval)]
+            evidences = [self._warp_evidence(k, d.phase[rows], d.observed[rows], interval,
+                                             priors[k]) for k in range(self.n_components)]
+            linear = np.array([f(start[0])[0] for f in evidences])
+            k = int(np.argmax(np.log(self.weights_) + linear + alpha_log_density(
+                [1.0 / d.duration], self.alpha_mean_, self.alpha_std_ ** 2)[0]))
+            b = map_warp(evidences[k], *start, gradient=True)[0]
+            try:
+                gains[i] = laplace(evidences[k], b, *start)[0] - linear[k]
+            except (ValueError, np.linalg.LinAlgError):
+                gains[i] = 0.0          # where the warp fails, the end posterior reads linear
+        return gains
 
     @property
     def warp_spacing(self) -> float:
