@@ -425,7 +425,10 @@ def page(R: dict) -> str:
                          f'{n}: {s:.1f}' for n, s in zip(ts['sizes'], ts['seconds']))
                      + f" (time ~ N^{ts['exponent']:.2f}); 36 demonstrations of 10 DOFs x 300 "
                      f"samples {lay['seconds']:.1f} s. Stages at N = {ts['sizes'][-1]}: "
-                     + ', '.join(f'{k} {v:.1f} s' for k, v in ts['stages'][-1].items()) + '.')
+                     + ', '.join(f'{k} {v:.1f} s' for k, v in ts['stages'][-1].items()) + '.'
+                     + (' Phase chosen by held-out prediction: ' + ', '.join(
+                         f'{n}: {p}' for n, p in zip(ts['sizes'], ts['phase'])) + '.'
+                        if 'phase' in ts else ''))
         e = R.get('estimator')
         if e:
             L.append(f"- `estimator.py`: one observation absorbed by the online estimator "

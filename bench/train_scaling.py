@@ -62,7 +62,7 @@ def one(kind: str, n: int) -> dict:
                                 candidates=range(1, 7))
         total = time.perf_counter() - t0
     return {'n': len(demos), 'seconds': round(total, 2), 'stages': info['seconds'],
-            'K': info['n_components']}
+            'K': info['n_components'], 'phase': info.get('phase', {}).get('chosen')}
 
 
 def main():
@@ -88,6 +88,7 @@ def main():
     print(json.dumps({'sizes': sizes, 'seconds': seconds, 'exponent': exponent,
                       'stages': [runs[f'box:{n}']['stages'] for n in sizes],
                       'K': [runs[f'box:{n}']['K'] for n in sizes],
+                      'phase': [runs[f'box:{n}']['phase'] for n in sizes],
                       'layout_10_dofs_36x300': runs['layout:36']}))
 
 
