@@ -138,7 +138,10 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
     the floor is calibrated over ``prior_scales`` on ``n_folds`` held-out folds. Returns
     (model, info dict): info['selection'] holds the curve of the criterion, the chosen K, its
     floor and whether the curve has a clear optimum (a flat curve is reported as such, never
-    silently read as K = 1); info['seconds'] the time of each stage (``stages``, a
+    silently read as K = 1); info['phase'] whether the phase bends (the warps kept where a
+    warp predicts held-out folds better, MixtureIProMP.warp_gains; EM keeps them) and
+    info['warp_failed'] the demonstrations whose warp did not converge; info['seconds'] the
+    time of each stage (``stages``, a
     :class:`Stages`, also shows them). The held-out folds run on ``n_jobs`` threads
     (core.parallel.map_threads; None: every core this process may use), with the same result
     for any number; ``progress`` may be called from them, one call at a time, and

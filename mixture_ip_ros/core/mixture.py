@@ -484,18 +484,11 @@ class MixtureIProMP:
         if len(demos) != len(self.resp_) or not all(isinstance(d, Demonstration) for d in demos):
             raise ValueError(f'fit_warps needs the {len(self.resp_)} Demonstrations the model '
                              f'was fitted to, got {len(demos)}')
-        if not (np.isfinite(min_interval) and min_interval >= 0):
-            raise ValueError(f'min_interval must be a number of seconds >= 0, got '
-                             f'{min_interval!r}')
         component = np.argmax(self.resp_, axis=1)
-        interval = max(self.warp_spacing, float(min_interval))
+        interval = self._warp_interval(min_interval)
         priors = [self._observed_prior(k) for k in range(self.n_components)]
-        evidences = []
-        for d, k in zip(demos, component):
-            rows = np.flatnonzero(~np.isnan(d.observed).all(axis=1))
-            rows = rows[decimated_rows(d.t[rows], interval)]
-            evidences.append(self._warp_evidence(k, d.phase[rows], d.observed[rows], interval,
-                                                 priors[k]))
+        evidences = [self._warp_evidence(k, *self._warp_reading(d, interval), interval,
+                                         priors[k]) for d, k in zip(demos, component)]
         self.warp_mean_, self.warp_sd_, good = learn_warp_priors(evidences, component,
                                                                  self.n_components)
         self.warp_failed_ = [d.name if d.name else i for i, d in enumerate(demos)
@@ -512,15 +505,14 @@ class MixtureIProMP:
         learning per fold. Training's held-out choice of the phase."""
         self._check_fitted()
         demos = list(demonstrations)
-        interval = max(self.warp_spacing, float(min_interval))
+        interval = self._warp_interval(min_interval)
         priors = [self._observed_prior(k) for k in range(self.n_components)]
         start = np.zeros(N_WARP), np.full(N_WARP, START_SD)
         gains = np.empty(len(demos))
         for i, d in enumerate(demos):
-            rows = np.flatnonzero(~np.isnan(d.observed).all(axis=1))
-            rows = rows[decimated_rows(d.t[rows], interval)]
-            evidences = [self._warp_evidence(k, d.phase[rows], d.observed[rows], interval,
-                                             priors[k]) for k in range(self.n_components)]
+            reading = self._warp_reading(d, interval)
+            evidences = [self._warp_evidence(k, *reading, interval, priors[k])
+                         for k in range(self.n_components)]
             linear = np.array([f(start[0])[0] for f in evidences])
             k = int(np.argmax(np.log(self.weights_) + linear + alpha_log_density(
                 [1.0 / d.duration], self.alpha_mean_, self.alpha_std_ ** 2)[0]))
@@ -539,6 +531,22 @@ class MixtureIProMP:
         every warp look certain."""
         self._check_fitted()
         return float(np.max(self.noise_time_[:self.n_observed_], initial=0.0))
+
+    def _warp_interval(self, min_interval) -> float:
+        """The spacing a recording's warp is read at: :attr:`warp_spacing`, at least
+        ``min_interval`` (the estimator's decimation)."""
+        if not (np.isfinite(min_interval) and min_interval >= 0):
+            raise ValueError(f'min_interval must be a number of seconds >= 0, got '
+                             f'{min_interval!r}')
+        return max(self.warp_spacing, float(min_interval))
+
+    @staticmethod
+    def _warp_reading(demo, interval):
+        """(relative times, observed agent) of ``demo``'s samples with the observed agent seen,
+        at least ``interval`` s apart, as the estimator absorbs them."""
+        rows = np.flatnonzero(~np.isnan(demo.observed).all(axis=1))
+        rows = rows[decimated_rows(demo.t[rows], interval)]
+        return demo.phase[rows], demo.observed[rows]
 
     def _observed_prior(self, k):
         """Component k's Gaussian over the observed agent's weights as its warp evidence takes
