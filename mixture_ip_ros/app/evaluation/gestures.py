@@ -183,8 +183,10 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
                   'fractions': 'part of the recording observed (from its first sample)',
                   'given_end': 'the whole recording fed to the online estimator (phase '
                                'unknown), then its end time given, where the phase is 1, '
-                               "each component's warp integrated out "
-                               '(OnlineEstimator.end_posterior); beside the same without '
+                               "each component's warp integrated out where the model has "
+                               'warps (OnlineEstimator.end_posterior; the supervised and '
+                               'reference models always, the unsupervised one where training '
+                               'kept them); beside the same without '
                                'the end, the "1" of the phase-unknown curves',
                   'noise_var': 'g^2'},
         'timings_s': timings,
