@@ -1,6 +1,7 @@
 """Recognition once the movement's end is known (the observer's 'end' event), with the linear
 phase and with each component's own phase warp (the thesis's eq. 34, core.warp;
-MixtureIProMP.fit_warps, which training runs). Prints one JSON object.
+MixtureIProMP.fit_warps, which training runs where a warp predicts held-out recordings
+better). Prints one JSON object.
 
 On NuiSI v1 and v2, as recorded and with the people's pace changed within each recording (the
 robustness bench's ``tempo``: scenarios.corruption.retimed), the interactions evaluation's 5

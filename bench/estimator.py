@@ -12,7 +12,8 @@ followed by the posterior query (as the estimator node does). Also in the same r
 - ``end_event``: the component posterior once the movement's end is known
   (OnlineEstimator.end_posterior, once per interaction) after a 10 s movement at the node's
   20 Hz (200 samples), with the linear phase and with each component's MAP warp (the model's
-  phase warps, which training learns), K = 3 and 6.
+  phase warps, which training learns where they predict held-out recordings better), K = 3
+  and 6.
 
 Prints one JSON object.
 """

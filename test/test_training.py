@@ -144,6 +144,7 @@ def test_em_training_of_demonstrations_missing_an_agent_keeps_the_configured_spe
                            else d.controlled, label=d.label) for i, d in enumerate(demos)]
     model, info = train(gappy, n_components=3, method='em', n_basis=8)
     assert model.speed_weight == info['speed_weight'] == 1.0 and 'speed_scores' not in info
+    assert info['phase'] == {'held_out_gain': None, 'chosen': 'warped'}     # EM keeps warps
     assert train(gappy, n_components=3, method='em', n_basis=8,
                  speed_weight=0.2)[0].speed_weight == 0.2
 
@@ -189,3 +190,13 @@ def test_training_refuses_what_would_make_its_threads_or_shared_preparation_lie(
     shared, _ = train(demos, n_components=2, n_basis=8, prepared=prepared, n_jobs=np.int64(2))
     alone, _ = train(demos, n_components=2, n_basis=8, n_jobs=1)
     assert np.array_equal(shared.means_, alone.means_)
+
+
+def test_training_keeps_the_warps_only_where_they_predict_held_out_recordings_better():
+    from test_core_warp import recordings_at_warps
+    for spread, chosen in ((0.3, 'warped'), (0.0, 'linear')):
+        model, info = train(recordings_at_warps(spread, seed=13), n_components=2, n_basis=8)
+        assert info['phase']['chosen'] == chosen
+        assert (info['phase']['held_out_gain'] > 0) == (chosen == 'warped')
+        assert (model.warp_mean_ is not None) == (chosen == 'warped')
+        assert ('phase warps' in info['seconds']) == (chosen == 'warped')

@@ -138,8 +138,10 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
     the floor is calibrated over ``prior_scales`` on ``n_folds`` held-out folds. Returns
     (model, info dict): info['selection'] holds the curve of the criterion, the chosen K, its
     floor and whether the curve has a clear optimum (a flat curve is reported as such, never
-    silently read as K = 1); info['phase'] whether the phase bends (the warps kept where a
-    warp predicts held-out folds better, MixtureIProMP.warp_gains; EM keeps them) and
+    silently read as K = 1); info['phase'] whether the phase bends ('chosen': the warps kept
+    where a warp predicts held-out folds better, 'held_out_gain' the mean of
+    MixtureIProMP.warp_gains; EM, and too few demonstrations for a fold, keep them, gain None)
+    and
     info['warp_failed'] the demonstrations whose warp did not converge; info['seconds'] the
     time of each stage (``stages``, a
     :class:`Stages`, also shows them). The held-out folds run on ``n_jobs`` threads
@@ -232,6 +234,7 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
     # The phase warps where they predict held-out recordings better than the linear phase;
     # EM's demonstrations may lack a whole agent, which the folds' regression fits cannot
     # take: EM keeps them.
+    info['phase'] = {'held_out_gain': None, 'chosen': 'warped'}
     if params.get('method') != 'em':
         with stages('phase choice'):
             gain = _held_out_warp_gain(demos, data(), n_components, labels, n_folds,
@@ -241,7 +244,7 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
         if gain is not None:
             logger.info('phase: %s (a warp predicts held-out recordings %+.2f nats each against '
                         'the linear phase)', info['phase']['chosen'], gain)
-    if info.get('phase', {}).get('chosen', 'warped') == 'warped':
+    if info['phase']['chosen'] == 'warped':
         with stages('phase warps'):
             model.fit_warps(demos)
     if model.warp_failed_:

@@ -505,22 +505,27 @@ class MixtureIProMP:
         learning per fold. Training's held-out choice of the phase."""
         self._check_fitted()
         demos = list(demonstrations)
+        if not all(isinstance(d, Demonstration) for d in demos):
+            raise ValueError('warp_gains needs Demonstrations')
         interval = self._warp_interval(min_interval)
         priors = [self._observed_prior(k) for k in range(self.n_components)]
         start = np.zeros(N_WARP), np.full(N_WARP, START_SD)
-        gains = np.empty(len(demos))
+        gains = np.zeros(len(demos))
         for i, d in enumerate(demos):
             reading = self._warp_reading(d, interval)
             evidences = [self._warp_evidence(k, *reading, interval, priors[k])
                          for k in range(self.n_components)]
-            linear = np.array([f(start[0])[0] for f in evidences])
-            k = int(np.argmax(np.log(self.weights_) + linear + alpha_log_density(
-                [1.0 / d.duration], self.alpha_mean_, self.alpha_std_ ** 2)[0]))
-            b = map_warp(evidences[k], *start, gradient=True)[0]
+            # A recording whose evidence or warp cannot be computed, or whose warp fit did not
+            # converge, counts as no gain: it argues for neither phase.
             try:
-                gains[i] = laplace(evidences[k], b, *start)[0] - linear[k]
+                linear = np.array([f(start[0])[0] for f in evidences])
+                k = int(np.argmax(np.log(self.weights_) + linear + alpha_log_density(
+                    [1.0 / d.duration], self.alpha_mean_, self.alpha_std_ ** 2)[0]))
+                b, converged = map_warp(evidences[k], *start, gradient=True)
+                gain = laplace(evidences[k], b, *start)[0] - linear[k] if converged else 0.0
             except (ValueError, np.linalg.LinAlgError):
-                gains[i] = 0.0          # where the warp fails, the end posterior reads linear
+                gain = 0.0
+            gains[i] = gain if np.isfinite(gain) else 0.0
         return gains
 
     @property
@@ -535,10 +540,14 @@ class MixtureIProMP:
     def _warp_interval(self, min_interval) -> float:
         """The spacing a recording's warp is read at: :attr:`warp_spacing`, at least
         ``min_interval`` (the estimator's decimation)."""
-        if not (np.isfinite(min_interval) and min_interval >= 0):
+        try:
+            interval = float(min_interval)
+        except (TypeError, ValueError):
+            interval = np.nan
+        if not (np.isfinite(interval) and interval >= 0):
             raise ValueError(f'min_interval must be a number of seconds >= 0, got '
                              f'{min_interval!r}')
-        return max(self.warp_spacing, float(min_interval))
+        return max(self.warp_spacing, interval)
 
     @staticmethod
     def _warp_reading(demo, interval):

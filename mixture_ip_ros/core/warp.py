@@ -55,6 +55,9 @@ class WarpAt:
 
     def __init__(self, u):
         u = np.asarray(u, dtype=float)
+        if u.ndim != 1 or np.isnan(u).any():
+            raise ValueError(f'relative times must be a 1-D array without NaN, got shape '
+                             f'{u.shape}')
         self.u, self.inside = u, (u >= 0) & (u <= 1)
         at = np.clip(u, 0.0, 1.0) * (len(GRID) - 1)
         self.lo = at.astype(int)                     # u = 1: the padded point past GRID's last
