@@ -141,10 +141,8 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
     silently read as K = 1); info['phase'] whether the phase bends ('chosen': the warps kept
     where a warp predicts held-out folds better, 'held_out_gain' the mean of
     MixtureIProMP.warp_gains; EM, and too few demonstrations for a fold, keep them, gain None)
-    and
-    info['warp_failed'] the demonstrations whose warp did not converge; info['seconds'] the
-    time of each stage (``stages``, a
-    :class:`Stages`, also shows them). The held-out folds run on ``n_jobs`` threads
+    and info['warp_failed'] the demonstrations whose warp did not converge; info['seconds'] the
+    time of each stage (``stages``, a :class:`Stages`, also shows them). The held-out folds run on ``n_jobs`` threads
     (core.parallel.map_threads; None: every core this process may use), with the same result
     for any number; ``progress`` may be called from them, one call at a time, and
     ``random_state`` is an integer seed (a generator would be shared by the threads).

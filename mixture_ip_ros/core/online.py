@@ -500,10 +500,9 @@ class OnlineEstimator:
         alpha = 1.0 / float(t_end)
         t, Y = np.asarray(self._times), np.asarray(self._values)
         if self.model.warp_mean_ is not None:
-            # Samples as far apart as their residuals stay correlated and no closer than this
-            # estimator's decimation: how training read each recording's warp
-            # (MixtureIProMP.fit_warps, at the default min_interval).
-            spacing = max(self.model.warp_spacing, self.min_interval)
+            # Samples read as training read each recording's warp (MixtureIProMP.fit_warps),
+            # at this estimator's decimation.
+            spacing = self.model._warp_interval(self.min_interval)
             order = np.argsort(t, kind='stable')
             rows = order[decimated_rows(t[order], spacing)]
             try:
