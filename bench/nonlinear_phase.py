@@ -23,7 +23,14 @@ held-out recordings, cm, as docs/results.md):
   under other speed weights (how much the prefix tells of the speed); and a speed that may
   change at the present (the phase reached from the prefix's evidence, the rest of the
   movement at the speeds of the prior or of a tempered posterior: the one-step version of a
-  phase velocity in the state).
+  phase velocity in the state);
+- online, the warp tracked (the issue's item 2 in its exact form, by brute force): each
+  component's Gaussian over the warp as training learns it (MixtureIProMP.fit_warps; learned
+  here also where training chose the linear phase), and the posterior over the speed grid and
+  the warp given the prefix, the warp integrated out two ways: over N_POINTS fixed points of
+  the Gaussian (exact for that set of hypotheses, each a Kalman state the estimator would
+  carry), and at each grid speed by Laplace's method at its MAP warp (what the end event
+  does once T is known); the rest placed at each hypothesis's own warped phase.
 
 And what a phase tracked as the movement goes could give the arm, which replans every 0.1 s and
 so needs the partner only a little ahead: at every 0.25 s from 20 % of each held-out recording
@@ -42,7 +49,11 @@ regression of log T on the prefix read at its own true phase, as if it were alig
 trained on the component's training recordings read the same way); and, to tell the precision
 an aim asks for, the partner RMS with T known but 3, 5 or 10 % off.
 
-    OPENBLAS_NUM_THREADS=1 python bench/nonlinear_phase.py [--versions v1,v2]
+With ``--pace-changed`` every recording first gets the people's pace changed within the
+movement (scenarios.corruption.retimed, the robustness bench's ``tempo``): holds and hurries a
+warp is made for.
+
+    OPENBLAS_NUM_THREADS=1 python bench/nonlinear_phase.py [--versions v1,v2] [--pace-changed]
 """
 
 import argparse
@@ -56,6 +67,7 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 import numpy as np  # noqa: E402
 from scipy import linalg  # noqa: E402
 from scipy.special import logsumexp  # noqa: E402
+from scipy.stats import norm, qmc  # noqa: E402
 from sklearn.linear_model import RidgeCV  # noqa: E402
 from sklearn.pipeline import make_pipeline  # noqa: E402
 from sklearn.preprocessing import StandardScaler  # noqa: E402
@@ -67,7 +79,8 @@ from mixture_ip_ros.core.online import (OnlineEstimator, decimated_rows,  # noqa
                                         observed_rows, prefix_predictions, prefixes, supported)
 from mixture_ip_ros.core.phase import tempered_speed_posterior  # noqa: E402
 from mixture_ip_ros.core.promp import observation_stats, weight_posterior  # noqa: E402
-from mixture_ip_ros.core.warp import N_WARP, map_warp, registered, warp  # noqa: E402
+from mixture_ip_ros.core.warp import N_WARP, laplace, map_warp, registered, warp  # noqa: E402
+from mixture_ip_ros.scenarios.corruption import corrupted  # noqa: E402
 
 FRACTIONS = (0.3, 0.5, 0.7)
 ETAS = (1.0, 0.5, 0.2, 0.05, 0.0)
@@ -83,6 +96,10 @@ DURATION_OFF = (0.03, 0.05, 0.1)              # T known this far off: the precis
 HORIZONS = (0.0, 0.3, 1.0)                   # s ahead of a replan
 REPLAN_FROM, REPLAN_STEP = 0.2, 0.25         # replans from 20 % of the movement, every 0.25 s
 MAX_STEP = 4                                 # DTW: template steps a sample may move the phase on
+# The warp tracked online: N_POINTS quasi-random points of a standard normal in N_WARP dimensions
+# (scrambled Sobol, seed 0), each component's learned Gaussian's mean + sd * point.
+N_POINTS = 16
+WARP_POINTS = norm.ppf(qmc.Sobol(N_WARP, scramble=True, seed=0).random(N_POINTS))
 
 
 class Observed:
@@ -129,9 +146,12 @@ def rms(pred, truth):
 
 def online(model, warps, demo, config, etas):
     """Partner RMS after each fraction, T unknown: {eta: [per fraction]} for the MAP component's
-    expected path over the speed grid, phases z = g_k(alpha t)."""
+    expected path over the speed grid, phases z = g(alpha t; b). ``warps`` (K, S, N_WARP): each
+    component's warp points, equally probable a priori; the posterior over (alpha, b) on the
+    grid times the points is exact: p(D | k, alpha) the mean over the points of p(D | k, alpha,
+    b_s) (S = 1: one warp per component), p(b_s | D, k, alpha) ~ p(D | k, alpha, b_s)."""
     est = OnlineEstimator(model, n_alpha=config.n_alpha, min_interval=config.min_interval)
-    K, M = model.n_components, len(est.alphas)
+    K, M, S = model.n_components, len(est.alphas), warps.shape[1]
     log_prior = est._log_prior.reshape(K, M)
     comps = [Observed(model, k, config.min_interval) for k in range(K)]
     rows = observed_rows(demo)
@@ -140,29 +160,71 @@ def online(model, warps, demo, config, etas):
     for f in FRACTIONS:
         sel = used[demo.t[used] <= f * demo.duration + 1e-9]
         t, y = demo.t[sel], demo.observed[sel]
-        evidence, mus = np.empty((K, M)), {}
+        evidence, mus = np.empty((K, M, S)), {}
         for k in range(K):
             for m, a in enumerate(est.alphas):
-                mus[k, m], evidence[k, m] = comps[k].posterior(warp(a * t, warps[k]), y)
-        k = int(np.argmax(logsumexp(log_prior + evidence, axis=1)))
+                for s in range(S):
+                    mus[k, m, s], evidence[k, m, s] = comps[k].posterior(warp(a * t, warps[k, s]),
+                                                                         y)
+        speed_evidence = logsumexp(evidence, axis=2) - np.log(S)
+        k = int(np.argmax(logsumexp(log_prior + speed_evidence, axis=1)))
         rest = np.flatnonzero((demo.t > f * demo.duration + 1e-9)
                               & ~np.isnan(demo.controlled).any(axis=1))
         for eta in etas:
             if isinstance(eta, tuple):      # (eta of the phase reached, eta of the rest's speed)
-                now, later = (speeds(evidence[k], log_prior[k], e) for e in eta)
+                now, later = (speeds(speed_evidence[k], log_prior[k], e) for e in eta)
             else:
-                now = speeds(evidence[k], log_prior[k], model.speed_weight if eta is None else eta)
+                now = speeds(speed_evidence[k], log_prior[k],
+                             model.speed_weight if eta is None else eta)
                 later = None
             pred = 0.0
             for m, pm in zip(*now):
-                if later is None:           # one speed from the onset to the end
-                    z = est.alphas[m] * demo.t[rest]
-                    pred = pred + pm * comps[k].partner(mus[k, m], warp(z, warps[k]))
-                    continue
-                for j, pj in zip(*later):   # the phase reached at t[-1], then another speed
-                    z = est.alphas[m] * t[-1] + est.alphas[j] * (demo.t[rest] - t[-1])
-                    pred = pred + pm * pj * comps[k].partner(mus[k, m], warp(z, warps[k]))
+                for s, ps in zip(*supported(np.exp(evidence[k, m] - evidence[k, m].max()))):
+                    if later is None:       # one speed from the onset to the end
+                        z = est.alphas[m] * demo.t[rest]
+                        pred = pred + pm * ps * comps[k].partner(mus[k, m, s],
+                                                                 warp(z, warps[k, s]))
+                        continue
+                    for j, pj in zip(*later):   # the phase reached at t[-1], then another speed
+                        z = est.alphas[m] * t[-1] + est.alphas[j] * (demo.t[rest] - t[-1])
+                        pred = pred + pm * pj * ps * comps[k].partner(mus[k, m, s],
+                                                                      warp(z, warps[k, s]))
             out[eta].append(rms(pred, demo.controlled[rest]))
+    return out
+
+
+def online_laplace(model, demo, config):
+    """Partner RMS after each fraction, T unknown, the warp integrated out at each grid speed by
+    Laplace's method under the component's learned Gaussian (MixtureIProMP.fit_warps):
+    p(D | k, alpha) = int p(D | k, alpha, b) p(b | k) db at the MAP b of that speed, whose
+    phase g(alpha t; b) then places the rest; the speed under the model's speed weight."""
+    est = OnlineEstimator(model, n_alpha=config.n_alpha, min_interval=config.min_interval)
+    K, M = model.n_components, len(est.alphas)
+    log_prior = est._log_prior.reshape(K, M)
+    comps = [Observed(model, k, config.min_interval) for k in range(K)]
+    priors = [model._observed_prior(k) for k in range(K)]
+    rows = observed_rows(demo)
+    used = rows[decimated_rows(demo.t[rows], config.min_interval)]
+    out = []
+    for f in FRACTIONS:
+        sel = used[demo.t[used] <= f * demo.duration + 1e-9]
+        t, y = demo.t[sel], demo.observed[sel]
+        evidence, b = np.full((K, M), -np.inf), np.zeros((K, M, N_WARP))
+        for k in range(K):
+            prior = model.warp_mean_[k], model.warp_sd_[k]
+            for m, a in enumerate(est.alphas):
+                ev = model._warp_evidence(k, a * t, y, config.min_interval, priors[k])
+                b[k, m], converged = map_warp(ev, *prior, gradient=True)
+                if converged:           # else the speed is left out, as training leaves it
+                    evidence[k, m] = laplace(ev, b[k, m], *prior)[0]
+        k = int(np.argmax(logsumexp(log_prior + evidence, axis=1)))
+        rest = np.flatnonzero((demo.t > f * demo.duration + 1e-9)
+                              & ~np.isnan(demo.controlled).any(axis=1))
+        pred = 0.0
+        for m, pm in zip(*speeds(evidence[k], log_prior[k], model.speed_weight)):
+            mu = comps[k].posterior(warp(est.alphas[m] * t, b[k, m]), y)[0]
+            pred = pred + pm * comps[k].partner(mu, warp(est.alphas[m] * demo.t[rest], b[k, m]))
+        out.append(rms(pred, demo.controlled[rest]))
     return out
 
 
@@ -273,8 +335,9 @@ def durations_told(comps, k, est, demo, config, same, durations):
     recordings ``same`` of t T_i / t_i, t_i the time of recording i the prefix reaches by
     open-end DTW against it (nearest neighbours that need no model). And one that is not causal,
     a bound on what the prefix's shape tells of T: log T regressed (ridge, penalty by
-    leave-one-out, the prediction kept within the training durations) on the observed path at SHAPE_POINTS phases up to the fraction, each
-    recording read at its own true phase t / T (Fitts: a longer reach may take longer)."""
+    leave-one-out, the prediction kept within the training durations) on the observed path at
+    SHAPE_POINTS phases up to the fraction, each recording read at its own true phase t / T
+    (Fitts: a longer reach may take longer)."""
     rows = observed_rows(demo)
     used = rows[decimated_rows(demo.t[rows], config.min_interval)]
     T = demo.duration
@@ -326,20 +389,28 @@ def durations_told(comps, k, est, demo, config, same, durations):
     return out
 
 
-def version(v, prior_sd):
+def version(v, prior_sd, pace_changed=False):
     from mixture_ip_ros.scenarios import nuisi
     demos = nuisi.demonstrations(v, 'train') + nuisi.demonstrations(v, 'test')
+    if pace_changed:
+        demos = corrupted(demos, ('tempo',), seed=0)
     labels = np.array([d.label for d in demos])
     folds = stratified_folds(labels)
     config = interactions_config()
-    rows, ahead, told, failed = {}, {}, {}, []
+    rows, ahead, told, failed, failed_learned, chosen = {}, {}, {}, [], [], []
 
     def add(name, values, to=rows):
         to.setdefault(name, []).append(values)
     for f in range(folds.max() + 1):
         train_i, test_i = np.flatnonzero(folds != f), np.flatnonzero(folds == f)
         train = [demos[i] for i in train_i]
-        model, _ = trained(train, config, n_jobs=1, labels=labels[train_i])
+        model, info = trained(train, config, n_jobs=1, labels=labels[train_i])
+        chosen.append(info['phase']['chosen'])
+        if model.warp_mean_ is None:        # training chose the linear phase: warps anyway
+            model.fit_warps(train)
+        failed_learned += [str(x) for x in model.warp_failed_]
+        # The online warp's points: the same standard normal points for every component.
+        points = model.warp_mean_[:, None] + model.warp_sd_[:, None] * WARP_POINTS
         names = list(model.classes_)
         comp_of = [names.index(labels[i]) for i in train_i]
         fits = [fit_warp(Observed(model, k), d, prior_sd) for k, d in zip(comp_of, train)]
@@ -366,16 +437,21 @@ def version(v, prior_sd):
                                                      "component's mean warp": means[k]},
                                               d, config).items():
                     add(f'T known, {tag}{name}', r)
-            lin = online(model, linear, d, config, (None,) + ETAS + SPLITS)
+            lin = online(model, linear[:, None], d, config, (None,) + ETAS + SPLITS)
             add('online, linear', lin[None])
             for eta in ETAS:
                 add(f'online, linear, speed weight {eta:g}', lin[eta])
             for now, later in SPLITS:
                 add(f'online, the phase reached from speed weight {now:g}, the rest at speed '
                     f'weight {later:g}', lin[now, later])
-            add("online, component's mean warp", online(model, means, d, config, (None,))[None])
+            add("online, component's mean warp",
+                online(model, means[:, None], d, config, (None,))[None])
             add("online, registered, component's mean warp",
-                online(reg_model, means, d, config, (None,))[None])
+                online(reg_model, means[:, None], d, config, (None,))[None])
+            add(f"online, the warp tracked: {N_POINTS} points of the component's learned "
+                'Gaussian', online(model, points, d, config, (None,))[None])
+            add("online, the warp tracked: integrated at each speed by Laplace's method",
+                online_laplace(model, d, config))
             add("online, the package's estimator",
                 [rms(p.controlled, d.controlled[p.rest])
                  for p in prefix_predictions(est, d, FRACTIONS)])
@@ -392,7 +468,9 @@ def version(v, prior_sd):
         'duration_told_by_fraction': {      # name: [[mean |T_hat / T - 1|, partner RMS cm]]
             name: [[round(float(e), 3), round(100 * float(x), 1)] for e, x in np.mean(r, axis=0)]
             for name, r in told.items()},
-        'warp_fits_not_converged': failed}
+        'warp_fits_not_converged': failed,
+        'learned_warp_fits_not_converged': failed_learned,
+        'training_chose_warped': f"{chosen.count('warped')} of {len(chosen)}"}
 
 
 def main(argv=None):
@@ -400,12 +478,15 @@ def main(argv=None):
     p.add_argument('--versions', default='v1,v2')
     p.add_argument('--prior-sd', type=float, default=1.0,
                    help='prior standard deviation of the log phase rate weights b')
+    p.add_argument('--pace-changed', action='store_true',
+                   help="the recordings with the people's pace changed within each movement "
+                   "(the robustness bench's tempo)")
     args = p.parse_args(argv)
     t0 = time.perf_counter()
     out = {'fractions': list(FRACTIONS), 'horizons_s': list(HORIZONS), 'prior_sd': args.prior_sd,
-           'n_warp': N_WARP}
+           'n_warp': N_WARP, 'n_warp_points': N_POINTS, 'pace_changed': args.pace_changed}
     for v in args.versions.split(','):
-        out[v] = version(v, args.prior_sd)
+        out[v] = version(v, args.prior_sd, args.pace_changed)
     out['runtime_s'] = round(time.perf_counter() - t0, 1)
     print(json.dumps(out))
 

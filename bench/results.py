@@ -177,7 +177,16 @@ def phase_section(nl) -> list:
          f"of {nl['n_warp']} bumps, weights' prior sd {nl['prior_sd']:g}) is fitted to each "
          "demonstration by MAP under its component; \"registered\": the model retrained on "
          'the training recordings at their warped phases. Warp fits not converged: ' +
-         ', '.join(f"{v} {len(nl[v]['warp_fits_not_converged'])}" for v in versions) + '.', '',
+         ', '.join(f"{v} {len(nl[v]['warp_fits_not_converged'])}" for v in versions) + '. '
+         '"The warp tracked" (online, the warp hidden with the speed): each component\'s '
+         'Gaussian over the warp as training learns it, the posterior over the speed grid and '
+         f"the warp given the prefix, the warp integrated over {nl.get('n_warp_points', 16)} "
+         'fixed points of the Gaussian (exact for that set of hypotheses) or at each speed by '
+         "Laplace's method; training chose the warped phase in " +
+         ', '.join(f"{v} {nl[v].get('training_chose_warped', '?')}" for v in versions) +
+         ' folds; learned warp fits not converged: ' +
+         ', '.join(f"{v} {len(nl[v].get('learned_warp_fits_not_converged', ()))}"
+                   for v in versions) + '.', '',
          '| phase model | ' + ' | '.join(f'NuiSI {v}' for v in versions) + ' |',
          '|---|' + '---|' * len(versions)]
 
