@@ -5,7 +5,7 @@ Runs every `mixture-ip evaluate` scenario, the closed-loop demo for every shippe
 every command delayed), the interactions demo, and the benches (training, the estimator's
 update, the simulation, the soak, the phase models), each into out/results/<name>.json, then writes
 docs/results.md with the date, the machine and the commit. ``--reuse`` keeps the JSON already
-in out/results (to rewrite the page after one part was rerun). About 45 minutes on 2 cores.
+in out/results (to rewrite the page after one part was rerun). About 1 h 45 min on 2 cores (50 min of it bench/nonlinear_phase.py).
 
     .venv/bin/python bench/results.py [--reuse] [--only NAME,...]
 """
