@@ -144,6 +144,18 @@ def rms(pred, truth):
     return float(np.sqrt(np.mean(np.sum((pred - truth) ** 2, axis=1))))
 
 
+def prefixes_and_rests(demo, config):
+    """For each of FRACTIONS f: (times, positions) of the observed agent's samples the estimator
+    absorbs up to f T, and the samples after f T where the controlled agent was recorded."""
+    rows = observed_rows(demo)
+    used = rows[decimated_rows(demo.t[rows], config.min_interval)]
+    recorded = ~np.isnan(demo.controlled).any(axis=1)
+    for f in FRACTIONS:
+        sel = used[demo.t[used] <= f * demo.duration + 1e-9]
+        yield demo.t[sel], demo.observed[sel], np.flatnonzero(
+            (demo.t > f * demo.duration + 1e-9) & recorded)
+
+
 def online(model, warps, demo, config, etas):
     """Partner RMS after each fraction, T unknown: {eta: [per fraction]} for the MAP component's
     expected path over the speed grid, phases z = g(alpha t; b). ``warps`` (K, S, N_WARP): each
@@ -154,12 +166,8 @@ def online(model, warps, demo, config, etas):
     K, M, S = model.n_components, len(est.alphas), warps.shape[1]
     log_prior = est._log_prior.reshape(K, M)
     comps = [Observed(model, k, config.min_interval) for k in range(K)]
-    rows = observed_rows(demo)
-    used = rows[decimated_rows(demo.t[rows], config.min_interval)]
     out = {eta: [] for eta in etas}
-    for f in FRACTIONS:
-        sel = used[demo.t[used] <= f * demo.duration + 1e-9]
-        t, y = demo.t[sel], demo.observed[sel]
+    for t, y, rest in prefixes_and_rests(demo, config):
         evidence, mus = np.empty((K, M, S)), {}
         for k in range(K):
             for m, a in enumerate(est.alphas):
@@ -168,8 +176,6 @@ def online(model, warps, demo, config, etas):
                                                                          y)
         speed_evidence = logsumexp(evidence, axis=2) - np.log(S)
         k = int(np.argmax(logsumexp(log_prior + speed_evidence, axis=1)))
-        rest = np.flatnonzero((demo.t > f * demo.duration + 1e-9)
-                              & ~np.isnan(demo.controlled).any(axis=1))
         for eta in etas:
             if isinstance(eta, tuple):      # (eta of the phase reached, eta of the rest's speed)
                 now, later = (speeds(speed_evidence[k], log_prior[k], e) for e in eta)
@@ -203,12 +209,8 @@ def online_laplace(model, demo, config):
     log_prior = est._log_prior.reshape(K, M)
     comps = [Observed(model, k, config.min_interval) for k in range(K)]
     priors = [model._observed_prior(k) for k in range(K)]
-    rows = observed_rows(demo)
-    used = rows[decimated_rows(demo.t[rows], config.min_interval)]
     out = []
-    for f in FRACTIONS:
-        sel = used[demo.t[used] <= f * demo.duration + 1e-9]
-        t, y = demo.t[sel], demo.observed[sel]
+    for t, y, rest in prefixes_and_rests(demo, config):
         evidence, b = np.full((K, M), -np.inf), np.zeros((K, M, N_WARP))
         for k in range(K):
             prior = model.warp_mean_[k], model.warp_sd_[k]
@@ -218,8 +220,6 @@ def online_laplace(model, demo, config):
                 if converged:           # else the speed is left out, as training leaves it
                     evidence[k, m] = laplace(ev, b[k, m], *prior)[0]
         k = int(np.argmax(logsumexp(log_prior + evidence, axis=1)))
-        rest = np.flatnonzero((demo.t > f * demo.duration + 1e-9)
-                              & ~np.isnan(demo.controlled).any(axis=1))
         pred = 0.0
         for m, pm in zip(*speeds(evidence[k], log_prior[k], model.speed_weight)):
             mu = comps[k].posterior(warp(est.alphas[m] * t, b[k, m]), y)[0]
@@ -236,15 +236,10 @@ def speeds(evidence, log_prior, eta):
 
 def known_duration(comp, warps, demo, config):
     """Partner RMS after each fraction with T known, per named warp b: {name: [per fraction]}."""
-    rows = observed_rows(demo)
-    used = rows[decimated_rows(demo.t[rows], config.min_interval)]
     out = {name: [] for name in warps}
-    for f in FRACTIONS:
-        sel = used[demo.t[used] <= f * demo.duration + 1e-9]
-        rest = np.flatnonzero((demo.t > f * demo.duration + 1e-9)
-                              & ~np.isnan(demo.controlled).any(axis=1))
+    for t, y, rest in prefixes_and_rests(demo, config):
         for name, b in warps.items():
-            mu = comp.posterior(warp(demo.t[sel] / demo.duration, b), demo.observed[sel])[0]
+            mu = comp.posterior(warp(t / demo.duration, b), y)[0]
             out[name].append(rms(comp.partner(mu, warp(demo.t[rest] / demo.duration, b)),
                                  demo.controlled[rest]))
     return out
