@@ -142,9 +142,9 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
     where a warp predicts held-out folds better, 'held_out_gain' the mean of
     MixtureIProMP.warp_gains; EM, and too few demonstrations for a fold, keep them, gain None)
     and info['warp_failed'] the demonstrations whose warp did not converge; info['seconds'] the
-    time of each stage (``stages``, a :class:`Stages`, also shows them). The held-out folds run on ``n_jobs`` threads
-    (core.parallel.map_threads; None: every core this process may use), with the same result
-    for any number; ``progress`` may be called from them, one call at a time, and
+    time of each stage (``stages``, a :class:`Stages`, also shows them). The held-out folds
+    run on ``n_jobs`` threads (core.parallel.map_threads; None: every core this process may
+    use), with the same result for any number; ``progress`` may be called from them, one call at a time, and
     ``random_state`` is an integer seed (a generator would be shared by the threads).
     ``prepared``: what core.selection.prepare_for_cv made of ``demos`` with these ``params``
     and method 'regression', where the caller has it (else made here once, when a stage needs
