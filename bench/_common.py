@@ -1,10 +1,11 @@
-"""What the benches share; not a bench itself. The benches run as ``python bench/NAME.py``, with
-bench/ first on sys.path, and import this module as ``_common``.
+"""What the benches and experiments share; not a bench itself. They run as
+``python bench/NAME.py`` or ``python experiments/NAME.py`` and import this module as
+``bench._common`` (an experiment puts the checkout's root on sys.path first).
 
-- The replayed wrist stream and the nodes' parameters of bench/latency.py, which
-  bench/node_profile.py replays and profiles in one thread.
-- The rest-deviation cut of bench/gesture_representation.py: where a recording's movement starts
-  and ends when its signal rests at a level (an accelerometer reads gravity at rest).
+- The replayed wrist stream and the nodes' parameters of experiments/latency.py, which
+  experiments/node_profile.py replays and profiles in one thread.
+- The rest-deviation cut of experiments/gesture_representation.py: where a recording's movement
+  starts and ends when its signal rests at a level (an accelerometer reads gravity at rest).
 """
 
 import numpy as np

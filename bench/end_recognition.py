@@ -1,6 +1,6 @@
 """Recognition once the movement's end is known (the observer's 'end' event), with the linear
 phase and with each component's own phase warp (the thesis's eq. 34, core.warp;
-MixtureIProMP.fit_warps, which training runs where a warp predicts held-out recordings
+core.warped.PhaseWarps, which training fits where a warp predicts held-out recordings
 better). Prints one JSON object.
 
 On NuiSI v1 and v2, as recorded and with the people's pace changed within each recording (the
@@ -29,8 +29,9 @@ import numpy as np
 from mixture_ip_ros.app.evaluation.baselines import NearestNeighbour
 from mixture_ip_ros.app.evaluation.common import (majority_labels, online_component_given_end,
                                                   trained)
-from mixture_ip_ros.app.evaluation.interactions import (_run, interactions_config,
+from mixture_ip_ros.app.evaluation.interactions import (run_in_processes, interactions_config,
                                                         stratified_folds)
+from mixture_ip_ros.core.warped import PhaseWarps
 from mixture_ip_ros.scenarios import nuisi
 from mixture_ip_ros.scenarios.corruption import corrupted
 
@@ -42,9 +43,10 @@ def phases(model):
     from the same samples with the same noise as the warped one: the phase alone differs), and
     without warps (every sample absorbed, at the recordings' noise: a model without them)."""
     pinned, plain = copy.copy(model), copy.copy(model)
-    pinned.warp_mean_ = np.zeros_like(model.warp_mean_)
-    pinned.warp_sd_ = np.full_like(model.warp_sd_, 1e-6)
-    plain.warp_mean_ = plain.warp_sd_ = None
+    pinned.warps_ = copy.copy(model.warps_)
+    pinned.warps_.mean_ = np.zeros_like(model.warps_.mean_)
+    pinned.warps_.sd_ = np.full_like(model.warps_.sd_, 1e-6)
+    plain.warps_ = None
     return {'warped': model, 'linear, same samples': pinned, 'linear, every sample': plain}
 
 
@@ -63,9 +65,9 @@ def case(version, name, seed=0) -> dict:
         ks.append(int(info['n_components']))
         chosen += [info['phase']['chosen'], sup_info['phase']['chosen']]
         for model in (found, supervised):
-            if model.warp_mean_ is None:      # training chose the linear phase: warps anyway
-                model.fit_warps(train)
-        failed += len(found.warp_failed_) + len(supervised.warp_failed_)
+            if model.warps_ is None:          # training chose the linear phase: warps anyway
+                model.warps_ = PhaseWarps().fit(model, train)
+        failed += len(found.warps_.failed_) + len(supervised.warps_.failed_)
         models = {'discovered': (found, majority_labels(found, train)),
                   'supervised': (supervised, list(supervised.classes_))}
         for what, (model, names) in models.items():
@@ -88,7 +90,7 @@ def main():
     args = ap.parse_args()
     t0 = time.perf_counter()
     runs = [(v, c) for v in args.versions.split(',') for c in CASES]
-    results = _run([partial(case, v, c) for v, c in runs])
+    results = run_in_processes([partial(case, v, c) for v, c in runs])
     out = {}
     for (v, c), r in zip(runs, results):
         out.setdefault(v, {})[c] = r

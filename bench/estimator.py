@@ -30,6 +30,7 @@ import numpy as np  # noqa: E402
 from mixture_ip_ros.core.mixture import MixtureIProMP  # noqa: E402
 from mixture_ip_ros.core.online import OnlineEstimator  # noqa: E402
 from mixture_ip_ros.core.phase import log_evidence_batch  # noqa: E402
+from mixture_ip_ros.core.warped import PhaseWarps  # noqa: E402
 from mixture_ip_ros.scenarios.synthetic import mixture_demos  # noqa: E402
 
 PRUNE_BELOW = 1e-12
@@ -96,9 +97,10 @@ def end_event():
     for K in (3, 6):
         demos = mixture_demos(seed=K, counts=(12,) * K, n_obs=3, n_ctrl=7, n_basis=15,
                               durations=((1.0, 2.4),) * K)[0]
-        warped = MixtureIProMP(K, n_basis=15).fit(demos).fit_warps(demos)
+        warped = MixtureIProMP(K, n_basis=15).fit(demos)
+        warped.warps_ = PhaseWarps().fit(warped, demos)
         linear = copy.copy(warped)
-        linear.warp_mean_ = linear.warp_sd_ = None
+        linear.warps_ = None
         t, y = stream(max(demos, key=lambda d: d.duration))
         for name, model in (('linear', linear), ('warped', warped)):
             est = OnlineEstimator(model, n_alpha=50, min_interval=0.05)

@@ -48,7 +48,8 @@ def main():
         for model in args.models.split(','):
             out_dir = Path(args.out) / robot / model
             out_dir.mkdir(parents=True, exist_ok=True)
-            scene, model_path, info = app.prepare(data_dir, out_dir, robot, **MODELS[model])
+            scene, model_path, info = app.prepare_interactions_demo(data_dir, out_dir, robot,
+                                                                    **MODELS[model])
             records, report = app.replay(scene, model_path, info, data_dir)
             if args.render:
                 from mixture_ip_ros.viz.animation import render_interaction

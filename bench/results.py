@@ -3,9 +3,10 @@ drift from what the code gives.
 
 Runs every `mixture-ip evaluate` scenario, the closed-loop demo for every shipped arm (and with
 every command delayed), the interactions demo, and the benches (training, the estimator's
-update, the simulation, the soak, the phase models), each into out/results/<name>.json, then writes
-docs/results.md with the date, the machine and the commit. ``--reuse`` keeps the JSON already
-in out/results (to rewrite the page after one part was rerun). About 1 h 45 min on 2 cores (50 min of it bench/nonlinear_phase.py).
+update, the simulation, the soak, recognition once the end is known), each into
+out/results/<name>.json, then writes docs/results.md with the date, the machine and the commit.
+``--reuse`` keeps the JSON already in out/results (to rewrite the page after one part was
+rerun). About an hour on 2 cores. The experiments (experiments/, docs/method.md) are not run.
 
     .venv/bin/python bench/results.py [--reuse] [--only NAME,...]
 """
@@ -46,7 +47,6 @@ def jobs():
     out['robustness'] = ([sys.executable, str(ROOT / 'bench' / 'robustness.py'), '--out',
                           str(OUT / 'robustness')], None)
     out['cpu_kernels'] = ([sys.executable, str(ROOT / 'bench' / 'cpu_kernels.py')], None)
-    out['nonlinear_phase'] = ([sys.executable, str(ROOT / 'bench' / 'nonlinear_phase.py')], None)
     out['end_recognition'] = ([sys.executable, str(ROOT / 'bench' / 'end_recognition.py')],
                               None)
     out['train'] = ([sys.executable, str(ROOT / 'bench' / 'train.py')], None)
@@ -163,69 +163,6 @@ def robustness_section(rob, kernels) -> list:
               f"curves behind them differ by {kernels['curve_max_relative_difference']:.1e} "
               'relative at most.', '']
     return L
-
-
-def phase_section(nl) -> list:
-    """The phase models against the partner (bench/nonlinear_phase.py)."""
-    if not nl:
-        return []
-    versions = [v for v in ('v1', 'v2') if v in nl]
-    L = ['## A phase that bends, and what limits the partner (`bench/nonlinear_phase.py`)', '',
-         'The supervised mixture on the interactions evaluation\'s folds; partner RMS over the '
-         'rest of the interaction after 30 / 50 / 70 %, cm (mean over the held-out '
-         'recordings). The warp (thesis eq. 34 in a monotone family: the log phase rate a sum '
-         f"of {nl['n_warp']} bumps, weights' prior sd {nl['prior_sd']:g}) is fitted to each "
-         "demonstration by MAP under its component; \"registered\": the model retrained on "
-         'the training recordings at their warped phases. Warp fits not converged: ' +
-         ', '.join(f"{v} {len(nl[v]['warp_fits_not_converged'])}" for v in versions) + '. '
-         '"The warp tracked" (online, the warp hidden with the speed): each component\'s '
-         'Gaussian over the warp as training learns it, the posterior over the speed grid and '
-         f"the warp given the prefix, the warp integrated over {nl.get('n_warp_points', 16)} "
-         'fixed points of the Gaussian (exact for that set of hypotheses) or at each speed by '
-         "Laplace's method; training chose the warped phase in " +
-         ', '.join(f"{v} {nl[v].get('training_chose_warped', '?')}" for v in versions) +
-         ' folds; learned warp fits not converged: ' +
-         ', '.join(f"{v} {len(nl[v].get('learned_warp_fits_not_converged', ()))}"
-                   for v in versions) + '.', '',
-         '| phase model | ' + ' | '.join(f'NuiSI {v}' for v in versions) + ' |',
-         '|---|' + '---|' * len(versions)]
-
-    def table(key):
-        for name in nl[versions[0]][key]:
-            L.append(f'| {name} | ' + ' | '.join(
-                ' / '.join(f'{x:.1f}' for x in nl[v][key][name]) for v in versions) + ' |')
-    table('partner_rms_cm_mean_by_fraction')
-    if 'partner_rms_cm_mean_by_horizon' in nl[versions[0]]:
-        L += ['', 'A little ahead, as the arm needs it (it replans every 0.1 s): from 20 % of each '
-              'held-out recording on, every 0.25 s, the partner predicted ' +
-              ' / '.join(f'{h:g}' for h in nl['horizons_s']) + ' s ahead, RMS in cm (mean over '
-              'the recordings). The phase of each observed sample by DTW against the '
-              "component's mean path, of the whole recording (an oracle: the phase tracked "
-              'knowing the future) or of the prefix only (causal).', '',
-              '| method | ' + ' | '.join(f'NuiSI {v}' for v in versions) + ' |',
-              '|---|' + '---|' * len(versions)]
-        table('partner_rms_cm_mean_by_horizon')
-    if 'duration_told_by_fraction' in nl[versions[0]]:
-        L += ['', 'How much the beginning of a recording tells of its duration T (the linear '
-              'phase needs it to place the rest of the partner in time): after 30 / 50 / 70 %, '
-              'the mean relative error of T estimated from the prefix, causally (but for the '
-              "oracle, which reads the prefix at its true phase: what the prefix's shape could "
-              'tell if it were aligned perfectly), and in brackets the partner RMS in cm with '
-              "that T (the weights conditioned on the prefix as with T known; the recording's "
-              'own component). With T known: ' +
-              ', '.join(f"{v} " + ' / '.join(
-                  f'{x:.1f}' for x in nl[v]['partner_rms_cm_mean_by_fraction']['T known, linear'])
-                  for v in versions) + ' cm.', '',
-              '| T from | ' + ' | '.join(f'NuiSI {v}' for v in versions) + ' |',
-              '|---|' + '---|' * len(versions)]
-        for name in nl[versions[0]]['duration_told_by_fraction']:
-            cells = []
-            for v in versions:
-                r = nl[v]['duration_told_by_fraction'][name]
-                cells.append(' / '.join(f'{100 * e:.1f}' for e, _ in r) + ' % (' +
-                             ' / '.join(f'{x:.1f}' for _, x in r) + ')')
-            L.append(f'| {name} | ' + ' | '.join(cells) + ' |')
-    return L + ['']
 
 
 def end_section(er) -> list:
@@ -368,7 +305,6 @@ def page(R: dict) -> str:
         people = ' / '.join(f"{m['people_contact_distance_cm']:.1f}" for m in (v1, v2))
         L += [f'| {name.format(people=people + " cm")} | {f(v1)} | {f(v2)} |'
               for name, f in rows] + ['']
-    L += phase_section(R.get('nonlinear_phase'))
     L += end_section(R.get('end_recognition'))
     L += robustness_section(R.get('robustness'), R.get('cpu_kernels'))
     demos = [(r, R.get(f'demo_{r}')) for r in ROBOTS]

@@ -28,13 +28,17 @@ import time
 import numpy as np
 
 from mixture_ip_ros.app.evaluation.common import jsonable
-from mixture_ip_ros.app.evaluation.interactions import (N_FOLDS, _fold_tasks, _metrics, _run,
-                                                        interactions_config)
+from mixture_ip_ros.app.evaluation.interactions import (N_FOLDS, fold_metrics, fold_tasks,
+                                                        interactions_config,
+                                                        run_in_processes)
 from mixture_ip_ros.core.patterns import translation_for
 from mixture_ip_ros.scenarios import nuisi
 from mixture_ip_ros.scenarios.corruption import DEFAULTS, corrupted
 
 ROOT = Path(__file__).resolve().parents[1]
+# (d): the share of each fold's training recordings of every interaction it is trained on,
+# drawn per fold by the evaluation (EvalConfig.train_fraction), not a change of the recordings.
+TRAIN_FRACTION = 0.5
 # name -> (corruptions, share of the training recordings, translation mode)
 CASES = {
     'clean': ((), 1.0, 'none'),
@@ -43,10 +47,10 @@ CASES = {
     'offset_none': (('offset',), 1.0, 'none'),
     'noise': (('noise',), 1.0, 'none'),
     'clock': (('clock',), 1.0, 'none'),
-    'half': ((), DEFAULTS.train_fraction, 'none'),
+    'half': ((), TRAIN_FRACTION, 'none'),
     'all': (('offset', 'noise', 'clock'), 1.0, 'shared'),
     'all_none': (('offset', 'noise', 'clock'), 1.0, 'none'),
-    'all_half': (('offset', 'noise', 'clock'), DEFAULTS.train_fraction, 'shared'),
+    'all_half': (('offset', 'noise', 'clock'), TRAIN_FRACTION, 'shared'),
     'tempo': (('tempo',), 1.0, 'none'),
 }
 EXPECTED_K = {'v1': 6, 'v2': 4}
@@ -112,14 +116,15 @@ def main():
             config = replace(base, train_fraction=share,
                              model={**base.model, **({'translation': groups} if groups else {})})
             runs.append((v, c, data, config))
-            tasks += _fold_tasks(data, config, 0)
+            tasks += fold_tasks(data, config, 0)
     # Every case's folds in one pool, so that both cores stay busy to the end.
-    results = _run(tasks)
-    out = {'seed': args.seed, 'magnitudes': DEFAULTS.__dict__,
+    results = run_in_processes(tasks)
+    out = {'seed': args.seed,
+           'magnitudes': {**DEFAULTS.__dict__, 'train_fraction': TRAIN_FRACTION},
            'cases': {c: {'corruptions': list(CASES[c][0]), 'train_fraction': CASES[c][1],
                          'translation': CASES[c][2]} for c in cases}}
     for g, (v, c, data, config) in enumerate(runs):
-        m = _metrics(data, results[g * N_FOLDS:(g + 1) * N_FOLDS], Path(args.out) / v / c,
+        m = fold_metrics(data, results[g * N_FOLDS:(g + 1) * N_FOLDS], Path(args.out) / v / c,
                      config, f'nuisi_{v}_{c}', cm=True)
         out.setdefault(v, {})[c] = summary(m, out.get(v, {}).get('clean'))
     for v in versions:

@@ -42,7 +42,7 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 KEYS = ('train_s', 'load_s', 'prepare_s', 'selection_s', 'patterns_s', 'heldout_s', 'speed_s',
         'novelty_s', 'fit_s', 'choice_s', 'warps_s', 'save_s', 'peak_rss_mb', 'n_fits')
-# The JSON's keys for training's stages (app.training.Stages, info['seconds']).
+# The JSON's keys for training's stages (app.progress.Stages, info['seconds']).
 STAGES = {'prepare_s': 'preparing', 'patterns_s': 'choosing K', 'heldout_s': 'covariance floor',
           'speed_s': 'speed weight', 'fit_s': 'final fit', 'choice_s': 'phase choice',
           'warps_s': 'phase warps',
@@ -68,7 +68,8 @@ def plain_heldout(demos, candidates, fractions=(), prior_scales=(), n_folds=5, p
     fold's demonstrations, one after another: ``n_jobs`` and ``prepared`` are not used)."""
     import numpy as np
     from mixture_ip_ros.core.mixture import MixtureIProMP
-    from mixture_ip_ros.core.selection import cv_folds, online_rms, prepare_for_cv
+    from mixture_ip_ros.core.crossval import cv_folds, prepare_for_cv
+    from mixture_ip_ros.core.scores import online_rms
     fold = cv_folds(len(demos), n_folds, fold_seed)
     scales = [float(s) for s in prior_scales]
     params = {k: v for k, v in params.items() if k != 'prior_scale'}
@@ -121,12 +122,12 @@ def plain_ecm(batched):
 def one_run(bags: Path, reference: bool) -> dict:
     """Load and train once in this process (the way `mixture-ip train` does)."""
     from mixture_ip_ros.app import training
-    from mixture_ip_ros.core import mixture, patterns
+    from mixture_ip_ros.core import mixture, patterns, selection
     from mixture_ip_ros.io.dataset import load_dataset
     from mixture_ip_ros.robot.description import load_description
     fits = [0]
     if reference:
-        training.calibrated_heldout_curves = plain_heldout
+        selection.calibrated_heldout_curves = plain_heldout
         patterns.PatternMixture._ecm = plain_ecm(patterns.PatternMixture._ecm)
     count_calls(mixture.MixtureIProMP, 'fit', fits)
     robot = load_description(None)

@@ -3,7 +3,7 @@
 Generated box assembly (48 demonstrations a seed; N = 48, 96, 192, 384 from seeds 0, 1, ...)
 and one layout of 10 DOFs (3 observed, 7 controlled) of 36 demonstrations of 300 samples,
 each trained in a fresh process as `mixture-ip train` trains (app.training.train_to_file, K
-chosen over 1..6): the time of every stage (app.training.Stages: choosing K, the covariance
+chosen over 1..6): the time of every stage (app.progress.Stages: choosing K, the covariance
 floor, the speed weight, the final fit, the novelty calibration, saving) and in all. The
 exponent is the slope of log(total seconds) against log(N) over the box-assembly sizes.
 

@@ -11,10 +11,10 @@ from conftest import heldout_loglik
 from mixture_ip_ros.core.basis import GaussianBasis
 from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.core.mixture import MixtureIProMP
-from mixture_ip_ros.core.selection import COMPLETION_FRACTIONS
-from mixture_ip_ros.core.selection import (calibrated_heldout_curves, controlled_rms, cv_folds,
-                                           online_rms, prepare_for_cv, score_completion,
-                                           selection_curve)
+from mixture_ip_ros.core.crossval import cv_folds, prepare_for_cv
+from mixture_ip_ros.core.scores import (COMPLETION_FRACTIONS, controlled_rms, online_rms,
+                                        score_completion)
+from mixture_ip_ros.core.selection import calibrated_heldout_curves, selection_curve
 from mixture_ip_ros.core.promp import (log_evidence, observation_stats, stack_stats,
                                        weight_posterior)
 from mixture_ip_ros.scenarios.synthetic import mixture_demos, random_spd
@@ -147,11 +147,11 @@ def test_completion_curves_equal_the_straightforward_loop(n_ctrl):
 
 @pytest.mark.parametrize('noise', ['tied', 'per_component'])
 def test_batched_final_rms_equals_controlled_rms(noise):
-    from mixture_ip_ros.core.selection import _final_rms, _final_views
+    from mixture_ip_ros.core.scores import final_rms, final_views
     demos = mixture_demos(seed=3, n_obs=3, n_ctrl=2, counts=(8, 9, 7))[0]
     model = MixtureIProMP(3, n_basis=8, noise=noise, observation_noise=0.01).fit(demos[4:])
-    view = _final_views(model.basis_, demos)
-    got = _final_rms(model, view, np.arange(6))
+    view = final_views(model.basis_, demos)
+    got = final_rms(model, view, np.arange(6))
     assert np.allclose(got, [controlled_rms(model, d, 'final') for d in demos[:6]], rtol=1e-9)
 
 
@@ -159,7 +159,7 @@ def test_online_rms_is_the_estimators_prediction_of_the_rest():
     """online_rms: the estimator fed the decimated samples up to each fraction (absorbed in one
     go, an order the recursive form does not depend on), its MAP component's expected path of
     the controlled agent over the rest; RMS over samples and DOFs, mean over the fractions."""
-    from mixture_ip_ros.core.online import decimated_rows
+    from mixture_ip_ros.core.noise import decimated_rows
     from mixture_ip_ros.core.online import OnlineEstimator
     demos = mixture_demos(seed=3, n_obs=2, n_ctrl=2, counts=(8, 9, 7))[0]
     model = MixtureIProMP(3, n_basis=8, speed_weight=0.2).fit(demos[3:])
@@ -182,7 +182,7 @@ def test_completion_and_heldout_loglik_on_ten_sampled_sets_of_three_patterns():
     three well separated patterns the held-out likelihood finds 3 every time, the completion
     criterion in 8 or 9 of 10 (seed 9: 2; seed 8's K = 4 is better than K = 3 by 2.1 paired
     standard errors, at the rule's edge, and which side it falls moves with the LAPACK build).
-    bench/selection_curves.py has the same at wider within-pattern spreads."""
+    experiments/selection_curves.py has the same at wider within-pattern spreads."""
     right = {'loglik': 0, 'completion': 0}
     for seed in range(10):
         demos = mixture_demos(seed=seed, n_obs=2, n_ctrl=0)[0]

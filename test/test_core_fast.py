@@ -4,8 +4,8 @@ lane-group layout (the estimator's results against batch conditioning: test_core
 import numba
 import numpy as np
 
-from mixture_ip_ros.core._fast import (W, compact_lanes, from_lanes, to_lanes, tri_index, vload,
-                                       vsplat, vsqrt, vstore)
+from mixture_ip_ros.core._fast import (LANES, compact_lanes, from_lanes, to_lanes, tri_index,
+                                       vload, vsplat, vsqrt, vstore)
 
 
 @numba.njit(fastmath={'contract'})
@@ -16,20 +16,20 @@ def _lane_expression(a, b, out, i):
 
 def test_lane_operations_match_numpy_at_any_offset():
     rng = np.random.default_rng(0)
-    a, b = rng.uniform(-3, 3, 3 * W), rng.uniform(0.5, 4, W)
-    for i in (0, 3, 2 * W):
-        out = np.full(W, np.nan)
+    a, b = rng.uniform(-3, 3, 3 * LANES), rng.uniform(0.5, 4, LANES)
+    for i in (0, 3, 2 * LANES):
+        out = np.full(LANES, np.nan)
         _lane_expression(a, b, out, i)
-        x = a[i:i + W]
+        x = a[i:i + LANES]
         np.testing.assert_allclose(out, (x * b + 2.0) / np.sqrt(b) - x, rtol=1e-15, atol=1e-15)
 
 
 def test_lane_groups_round_trip_and_pack_the_lower_triangle():
     rng = np.random.default_rng(1)
-    columns = rng.standard_normal((3 * W, 5))
+    columns = rng.standard_normal((3 * LANES, 5))
     groups = to_lanes(columns)
-    assert groups.shape == (3, 5 * W)
-    assert groups[1, 2 * W + 3] == columns[W + 3, 2]          # entry 2 of column W + 3
+    assert groups.shape == (3, 5 * LANES)
+    assert groups[1, 2 * LANES + 3] == columns[LANES + 3, 2]          # entry 2 of column LANES + 3
     np.testing.assert_array_equal(from_lanes(groups), columns)
     d = 4
     i, j = np.tril_indices(d)
@@ -40,9 +40,9 @@ def test_lane_groups_round_trip_and_pack_the_lower_triangle():
 
 def test_compact_lanes_moves_the_kept_columns_to_the_front_in_order():
     rng = np.random.default_rng(2)
-    columns = rng.standard_normal((4 * W, 7))
-    keep = rng.random(4 * W) < 0.4
-    keep[[0, 5, 4 * W - 1]] = [False, True, True]
+    columns = rng.standard_normal((4 * LANES, 7))
+    keep = rng.random(4 * LANES) < 0.4
+    keep[[0, 5, 4 * LANES - 1]] = [False, True, True]
     groups = to_lanes(columns)
     src = np.flatnonzero(keep)
     compact_lanes(groups, src)

@@ -222,7 +222,7 @@ def test_mixture_rejects_bad_input(three_patterns):
 
 def test_a_component_left_empty_keeps_a_finite_phase_prior():
     """K = 10 on 47 box-assembly demonstrations with a broad covariance floor: EM empties a
-    component (0 / 0 gave NaN priors and an all-NaN online posterior)."""
+    component, whose phase prior must not be 0 / 0 (NaN priors make the online posterior NaN)."""
     from mixture_ip_ros.core.online import OnlineEstimator
     from mixture_ip_ros.scenarios.box_assembly import box_assembly
     demos = [g.to_demonstration(0.01) for g in box_assembly(0, occlusion=0.5)]

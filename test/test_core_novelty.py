@@ -80,7 +80,7 @@ def test_thresholds_are_validated_and_read_per_number_of_observations():
 def test_calibration_bounds_every_held_out_statistic_with_a_margin(patterns):
     """By construction each threshold is below every held-out value by the spread between the
     lowest and the median: recomputed here from the same folds."""
-    from mixture_ip_ros.core.selection import cv_folds
+    from mixture_ip_ros.core.crossval import cv_folds
     from mixture_ip_ros.core.novelty import held_out_statistics
     train, _, thresholds, _ = patterns
     folds = cv_folds(len(train), 5, 0)

@@ -6,7 +6,7 @@ import pytest
 from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.core.interaction import condition_on_observed, trajectory_distribution
 from mixture_ip_ros.core.mixture import MixtureIProMP
-from mixture_ip_ros.core.online import OnlineEstimator, prefixes
+from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.core.phase import (alpha_log_prior, alpha_m_step, alpha_prior_std,
                                        log_density_on_grid, log_evidence_batch,
                                        phase_posterior_batch, tempered_speed_posterior,
@@ -15,6 +15,8 @@ from mixture_ip_ros.core.phase import (alpha_log_prior, alpha_m_step, alpha_prio
 from scipy.special import logsumexp
 from scipy.stats import multivariate_normal, norm
 
+from mixture_ip_ros.core.playback import (absorbed_rows, observed_rows, played_to,
+                                          prefix_predictions, prefixes, rest_rows)
 from mixture_ip_ros.scenarios.synthetic import mixture_demos, random_spd, sample_trajectory
 
 
@@ -113,7 +115,7 @@ def test_posterior_follows_every_update(model_and_demos):
     before = est.joint_posterior().copy()
     est.update(demos[3].t[5], demos[3].observed[5])
     after = est.joint_posterior()
-    lp = est._log_prior + est.log_evidence_flat
+    lp = est.log_prior.ravel() + est.log_evidence_flat
     assert not np.allclose(before, after)
     assert np.allclose(after.ravel(), np.exp(lp - lp.max()) / np.exp(lp - lp.max()).sum())
     est.reset()
@@ -215,6 +217,53 @@ def test_a_recording_played_to_cuts_is_offer_of_each_sample_to_each_cut(model_an
             done = i + 1
         assert _same_state(each, played)
     assert played.n_observations + played.n_skipped == len(demo.t) - 1
+
+
+def test_absorbed_rows_are_the_samples_an_estimator_fed_the_recording_absorbs(model_and_demos):
+    """playback.absorbed_rows: of a recording with the observed agent missing at some samples
+    (the first among them), the ones an estimator fed all of it absorbs, in order."""
+    model, demos, _ = model_and_demos
+    observed = demos[1].observed.copy()
+    observed[[0, 7, 8]] = np.nan
+    demo = Demonstration(demos[1].t, observed, demos[1].controlled)
+    assert np.array_equal(observed_rows(demo), np.setdiff1d(np.arange(len(demo.t)), [0, 7, 8]))
+    for min_interval in (0.0, 0.05, 0.13):
+        est = OnlineEstimator(model, n_alpha=7, min_interval=min_interval)
+        played_to(est, demo, demo.duration)
+        rows = absorbed_rows(demo, min_interval)
+        assert np.array_equal(est._times, demo.t[rows])
+        assert np.array_equal(np.array(est._values), demo.observed[rows])
+
+
+def test_the_rest_of_a_prefix_is_the_later_samples_with_the_controlled_agent_recorded(
+        model_and_demos):
+    """playback.rest_rows, where prefix_predictions predicts the controlled agent: after the
+    cut (the sample at it excluded), the samples with the controlled agent recorded."""
+    model, demos, _ = model_and_demos
+    controlled = demos[1].controlled.copy()
+    controlled[[30, 60]] = np.nan
+    demo = Demonstration(demos[1].t, demos[1].observed, controlled)
+    rest = rest_rows(demo, demo.t[29])
+    assert np.array_equal(rest, np.setdiff1d(np.arange(30, len(demo.t)), [30, 60]))
+    est = OnlineEstimator(model, n_alpha=7)
+    for f, p in zip((0.3, 0.6), prefix_predictions(est, demo, (0.3, 0.6))):
+        assert np.array_equal(p.rest, rest_rows(demo, f * demo.duration))
+        assert p.controlled.shape == (len(p.rest), demo.n_controlled_dofs)
+
+
+def test_speed_log_terms_give_the_tempered_speed_posterior_at_any_weight(model_and_demos):
+    """What training's calibration reads (core.calibration.speed_log_scores): component k's
+    log evidence and log prior over the grid, whose tempered posterior at the estimator's own
+    weight is speed_posterior(k)."""
+    model, demos, _ = model_and_demos
+    est = OnlineEstimator(model, n_alpha=12)
+    est.offer_many(demos[0].t[:40], demos[0].observed[:40])
+    k = est.map_hypothesis()[0]
+    evidence, log_prior = est.speed_log_terms(k)
+    assert np.array_equal(evidence, est.log_evidence[k])
+    assert np.array_equal(log_prior, est.log_prior[k])
+    assert np.allclose(np.exp(tempered_speed_posterior(evidence, log_prior, est.speed_weight)),
+                       est.speed_posterior(k), rtol=1e-12, atol=0)
 
 
 def test_the_lanes_past_the_tracked_hypotheses_stay_valid_states(model_and_demos):
@@ -487,7 +536,7 @@ def _dense_evidence(model, k, z, Y):
     P = model.n_observed_
     do = P * model.n_basis
     A = np.kron(np.eye(P), model.basis_(z))
-    S = (np.diag(np.repeat(model._observed_noise(k), len(z)))
+    S = (np.diag(np.repeat(model.observed_noise(k), len(z)))
          + A @ model.covariances_[k][:do, :do] @ A.T)
     return multivariate_normal(A @ model.means_[k][:do], S).logpdf(Y.T.ravel())
 

@@ -16,6 +16,8 @@ from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.noise import decimated_rows
 from mixture_ip_ros.core.promp import observation_stats, weight_posterior
+from mixture_ip_ros.core import warped as warped_module
+from mixture_ip_ros.core.warped import PhaseWarps, WarpEvidence, warp_spacing
 from mixture_ip_ros.core.warp import (CENTERS, FLAT, N_WARP, SD_FLOOR, START_SD, WIDTH,
                                       laplace, learn_warp_priors, map_warp, registered, warp,
                                       warp_jacobian, warp_prior)
@@ -209,24 +211,31 @@ def recordings_at_warps(spread, seed=7):
 def warped_mixture():
     """The mixture learned from recordings at warps of spread 0.3, and the recordings."""
     demos = recordings_at_warps(0.3)
-    return MixtureIProMP(n_components=2, n_basis=8).fit(demos).fit_warps(demos), demos
+    return with_warps(MixtureIProMP(n_components=2, n_basis=8).fit(demos), demos), demos
 
 
-def test_fit_warps_learns_how_much_the_pace_varies(warped_mixture):
+def with_warps(model, demos, **config):
+    """``model`` with its PhaseWarps fitted to ``demos``, as training gives them."""
+    model.warps_ = PhaseWarps(**config).fit(model, demos)
+    return model
+
+
+def test_phase_warps_learn_how_much_the_pace_varies(warped_mixture):
     """Warps are relative to each component's mean path (a warp common to every recording is
     part of that path): drawn around 0, the learned mean warp is about the linear phase; the
     learned spread is about the one the recordings were made at (EM with each warp's posterior
     variance: the MAP warps alone, shrunk to the prior, would shrink it round by round)."""
     model, demos = warped_mixture
-    assert model.warp_failed_ == []
+    warps = model.warps_
+    assert warps.failed_ == []
     u = np.linspace(0.0, 1.0, 101)
     for k in range(2):
-        assert np.max(np.abs(warp(u, model.warp_mean_[k]) - u)) < 0.05
+        assert np.max(np.abs(warp(u, warps.mean_[k]) - u)) < 0.05
     steady = recordings_at_warps(0.05)
-    calm = MixtureIProMP(n_components=2, n_basis=8).fit(steady).fit_warps(steady)
-    assert 0.15 < model.warp_sd_.mean() < 0.45                  # drawn at 0.3
-    assert np.all(calm.warp_sd_ < 0.12)                         # drawn at 0.05 (floor 0.05)
-    assert model.warp_sd_.mean() > 2 * calm.warp_sd_.mean()
+    calm = PhaseWarps().fit(MixtureIProMP(n_components=2, n_basis=8).fit(steady), steady)
+    assert 0.15 < warps.sd_.mean() < 0.45                       # drawn at 0.3
+    assert np.all(calm.sd_ < 0.12)                              # drawn at 0.05 (floor 0.05)
+    assert warps.sd_.mean() > 2 * calm.sd_.mean()
 
 
 def test_warp_evidence_gradient_matches_finite_differences(warped_mixture):
@@ -235,7 +244,7 @@ def test_warp_evidence_gradient_matches_finite_differences(warped_mixture):
     Y = d.observed.copy()
     Y[5:9] = np.nan                                           # a gap the gradient must skip
     Y[12:15, 1] = np.nan                                      # and one DOF missing alone
-    evidence = model._warp_evidence(0, d.phase, Y, 0.05)
+    evidence = WarpEvidence(model, 0, d.phase, Y, 0.05)
     b = np.array([0.2, -0.4, 0.1, 0.3, -0.1])
     value, grad = evidence(b)
     fd = [(evidence(b + 1e-6 * e)[0] - evidence(b - 1e-6 * e)[0]) / 2e-6 for e in np.eye(N_WARP)]
@@ -246,11 +255,11 @@ def test_warped_posterior_is_the_linear_one_when_the_warp_is_pinned(warped_mixtu
     """The linear phase is the special case b = 0: with every component's Gaussian over b
     pinned at 0, eq. 11 with the phase z = t / T."""
     model, demos = warped_mixture
-    pinned = copy.copy(model)
-    pinned.warp_mean_ = np.zeros_like(model.warp_mean_)
-    pinned.warp_sd_ = np.full_like(model.warp_sd_, 1e-6)
+    pinned = copy.copy(model.warps_)
+    pinned.mean_ = np.zeros_like(model.warps_.mean_)
+    pinned.sd_ = np.full_like(model.warps_.sd_, 1e-6)
     d = demos[20]
-    p, b = pinned.warped_component_posterior(d.phase[::3], d.observed[::3], 1 / d.duration)
+    p, b = pinned.component_posterior(model, d.phase[::3], d.observed[::3], 1 / d.duration)
     assert np.allclose(b, 0.0, atol=1e-6)
     assert np.allclose(p, model.component_posterior(d.phase[::3], d.observed[::3],
                                                     1 / d.duration), atol=1e-6)
@@ -263,19 +272,20 @@ def test_warped_posterior_integrates_each_components_warp_out(warped_mixture):
     model, demos = warped_mixture
     d = demos[2]
     u, Y = d.phase[::2], d.observed[::2]
-    p, b = model.warped_component_posterior(u, Y, interval=0.04)
+    warps = model.warps_
+    p, b = warps.component_posterior(model, u, Y, interval=0.04)
     basis, N = model.basis_, model.n_basis
     log_joint = []
     for k in range(2):
         A = np.kron(np.eye(2), basis(warp(u, b[k])))             # (2 m, 2 N): eq. 15's rows
         dense_cov = A @ model.covariances_[k][:2 * N, :2 * N] @ A.T
-        noise = np.repeat(model._observed_noise(k, 0.04), len(u))
+        noise = np.repeat(model.observed_noise(k, 0.04), len(u))
         dense = multivariate_normal(A @ model.means_[k][:2 * N],
                                     dense_cov + np.diag(noise)).logpdf(Y.T.ravel())
-        evidence = model._warp_evidence(k, u, Y, 0.04)
+        evidence = WarpEvidence(model, k, u, Y, 0.04)
         assert np.isclose(evidence(b[k])[0], dense, rtol=1e-10, atol=1e-8)
-        prior = norm(model.warp_mean_[k], model.warp_sd_[k])
-        log_z, cov = laplace(evidence, b[k], model.warp_mean_[k], model.warp_sd_[k])
+        prior = norm(warps.mean_[k], warps.sd_[k])
+        log_z, cov = laplace(evidence, b[k], warps.mean_[k], warps.sd_[k])
         q = multivariate_normal(b[k], cov)
         draws = q.rvs(400, random_state=k)
         w = [evidence(x)[0] + prior.logpdf(x).sum() - q.logpdf(x) for x in draws]
@@ -285,28 +295,27 @@ def test_warped_posterior_integrates_each_components_warp_out(warped_mixture):
     assert np.allclose(p, np.exp(log_joint - logsumexp(log_joint)), atol=1e-9)
 
 
-def test_fit_warps_reads_each_recording_as_the_estimator_does(warped_mixture, monkeypatch):
+def test_phase_warps_read_each_recording_as_the_estimator_does(warped_mixture, monkeypatch):
     """At samples no closer than the estimator's decimation (the recordings here are at 50 Hz
     with white residuals, min_interval 0.05 s), under its component's weights made once for
     every member (the same evidence as made per recording)."""
     model, demos = warped_mixture
-    real = MixtureIProMP._warp_evidence
     seen = []
 
-    def spy(self, k, u, Y, interval, prior=None):
+    def spy(model, k, u, Y, interval, prior=None):
         assert prior is not None                          # made once for every member
         seen.append((len(u), interval))
-        alone = real(self, k, u, Y, interval)
-        shared = real(self, k, u, Y, interval, prior)
+        alone = WarpEvidence(model, k, u, Y, interval)
+        shared = WarpEvidence(model, k, u, Y, interval, prior)
         b = np.linspace(-0.3, 0.3, N_WARP)
         assert alone(b)[0] == shared(b)[0] and np.array_equal(alone(b)[1], shared(b)[1])
         return shared
-    monkeypatch.setattr(MixtureIProMP, '_warp_evidence', spy)
-    copy.copy(model).fit_warps(demos)
-    assert model.warp_spacing < 0.05
+    monkeypatch.setattr(warped_module, 'WarpEvidence', spy)
+    PhaseWarps().fit(model, demos)
+    assert warp_spacing(model) < 0.05
     assert seen == [(len(decimated_rows(d.t, 0.05)), 0.05) for d in demos]
     with pytest.raises(ValueError, match='min_interval must be'):
-        copy.copy(model).fit_warps(demos, min_interval=-1.0)
+        PhaseWarps(min_interval=-1.0).fit(model, demos)
 
 
 def test_warp_gains_say_where_a_warp_predicts_held_out_recordings_better():
@@ -318,12 +327,12 @@ def test_warp_gains_say_where_a_warp_predicts_held_out_recordings_better():
         demos = recordings_at_warps(spread, seed=11)
         held_out = recordings_at_warps(spread, seed=12)
         model = MixtureIProMP(n_components=2, n_basis=8).fit(demos)
-        gains = model.warp_gains(held_out)
+        gains = PhaseWarps().gains(model, held_out)
         assert sign * gains.mean() > 0.5
         d = held_out[1]
         rows = decimated_rows(d.t, 0.05)
         start = np.zeros(N_WARP), np.full(N_WARP, START_SD)
-        evidences = [model._warp_evidence(j, d.phase[rows], d.observed[rows], 0.05)
+        evidences = [WarpEvidence(model, j, d.phase[rows], d.observed[rows], 0.05)
                      for j in range(2)]
         k = int(np.argmax(np.log(model.weights_) + [f(start[0])[0] for f in evidences]
                           + norm(model.alpha_mean_, model.alpha_std_).logpdf(1 / d.duration)))
@@ -332,39 +341,37 @@ def test_warp_gains_say_where_a_warp_predicts_held_out_recordings_better():
         assert np.isclose(gains[1], laplace(evidence, b, *start)[0] - evidence(start[0])[0])
 
 
-def test_fit_warps_needs_the_demonstrations_the_model_was_fitted_to(warped_mixture):
+def test_phase_warps_need_the_demonstrations_the_model_was_fitted_to(warped_mixture):
     model, demos = warped_mixture
-    with pytest.raises(ValueError, match='fit_warps needs the 28 Demonstrations'):
-        copy.copy(model).fit_warps(demos[:5])
+    with pytest.raises(ValueError, match='need the 28 Demonstrations'):
+        PhaseWarps().fit(model, demos[:5])
 
 
-def test_a_model_without_warps_refuses_the_warped_posterior(warped_mixture):
+def test_unfitted_warps_refuse_the_warped_posterior(warped_mixture):
     model, demos = warped_mixture
-    linear = copy.copy(model)
-    linear.warp_mean_ = linear.warp_sd_ = None
     with pytest.raises(ValueError, match='no phase warp'):
-        linear.warped_component_posterior(demos[0].phase, demos[0].observed)
+        PhaseWarps().component_posterior(model, demos[0].phase, demos[0].observed)
 
 
 def test_a_warp_that_does_not_converge_is_named_and_left_out(warped_mixture, monkeypatch):
     model, demos = warped_mixture
     named = [Demonstration(d.t, d.observed, d.controlled, d.label, f'rec{i}')
              for i, d in enumerate(demos)]
-    real = MixtureIProMP._warp_evidence
     calls = []
 
-    def failing_for_rec4(self, *args):
+    def failing_for_rec4(*args):
         calls.append(len(calls))
-        evidence = real(self, *args)
+        evidence = WarpEvidence(*args)
         return (lambda b: (np.nan, np.zeros(N_WARP))) if len(calls) == 5 else evidence
-    monkeypatch.setattr(MixtureIProMP, '_warp_evidence', failing_for_rec4)
-    refit = copy.copy(model).fit_warps(named)
-    assert refit.warp_failed_ == ['rec4']
-    assert np.all(np.isfinite(refit.warp_mean_)) and np.all(refit.warp_sd_ > 0)
+    monkeypatch.setattr(warped_module, 'WarpEvidence', failing_for_rec4)
+    refit = PhaseWarps().fit(model, named)
+    assert refit.failed_ == ['rec4']
+    assert np.all(np.isfinite(refit.mean_)) and np.all(refit.sd_ > 0)
 
 
 def test_end_posterior_aligns_each_component_when_the_model_has_warps(warped_mixture):
-    from mixture_ip_ros.core.online import OnlineEstimator, decimated_rows, played_to
+    from mixture_ip_ros.core.online import OnlineEstimator
+    from mixture_ip_ros.core.playback import played_to
     model, demos = warped_mixture
     model = copy.copy(model)
     model.noise_time_ = np.full_like(model.noise_time_, 0.2)  # residuals correlated over 0.2 s
@@ -372,12 +379,12 @@ def test_end_posterior_aligns_each_component_when_the_model_has_warps(warped_mix
     est = OnlineEstimator(model, n_alpha=9)
     played_to(est, d, d.duration)
     t, Y = np.array(est._times), np.array(est._values)
-    spacing = max(model.warp_spacing, est.min_interval)
+    spacing = max(warp_spacing(model), est.min_interval)
     rows = decimated_rows(t, spacing)
     assert spacing == 0.2 and 5 < len(rows) < len(t) / 3    # read as training read the warps
     p = est.end_posterior(d.duration)
-    expected = model.warped_component_posterior(np.minimum(t[rows] / d.duration, 1.0), Y[rows],
-                                                1 / d.duration, spacing)[0]
+    expected = model.warps_.component_posterior(model, np.minimum(t[rows] / d.duration, 1.0),
+                                                Y[rows], 1 / d.duration, spacing)[0]
     assert np.array_equal(p, expected)
 
 
@@ -439,7 +446,8 @@ def test_end_posterior_falls_back_to_the_linear_phase_if_every_warp_fails(warped
                                                                           monkeypatch):
     """A numerical failure at the end event must not leave the interaction without an answer
     (the node would send no final plan)."""
-    from mixture_ip_ros.core.online import OnlineEstimator, played_to
+    from mixture_ip_ros.core.online import OnlineEstimator
+    from mixture_ip_ros.core.playback import played_to
     model, demos = warped_mixture
     d = demos[5]
     est = OnlineEstimator(model, n_alpha=9)
@@ -447,7 +455,7 @@ def test_end_posterior_falls_back_to_the_linear_phase_if_every_warp_fails(warped
 
     def failing(*args, **kwargs):
         raise np.linalg.LinAlgError('not positive definite')
-    monkeypatch.setattr(MixtureIProMP, 'warped_component_posterior', failing)
+    monkeypatch.setattr(PhaseWarps, 'component_posterior', failing)
     t, Y = np.array(est._times), np.array(est._values)
     assert np.array_equal(est.end_posterior(d.duration), model.component_posterior(
         np.minimum(t / d.duration, 1.0), Y, alpha=1 / d.duration))

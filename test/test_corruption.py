@@ -33,7 +33,7 @@ def _unchanged(demos, copies):
 
 
 def test_the_defaults_are_the_documented_magnitudes_and_frozen():
-    assert DEFAULTS == Corruption((0.3, 0.15, 0.2), 0.02, 0.1, 0.004, 0.1, 5, 0.5, 0.3, 0.2)
+    assert DEFAULTS == Corruption((0.3, 0.15, 0.2), 0.02, 0.1, 0.004, 0.1, 5, 0.3, 0.2)
     with pytest.raises(dataclasses.FrozenInstanceError):
         DEFAULTS.drop = 0.5
 

@@ -11,8 +11,10 @@ from mixture_ip_ros.app.training import train
 from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.core.kmeans import kmeans
 from mixture_ip_ros.core.mixture import MixtureIProMP
-from mixture_ip_ros.core.selection import (controlled_rms, cv_folds, prepare_for_cv,
-                                           loo_rms_by_components)
+from mixture_ip_ros.core.crossval import (cv_folds, fold_scores, k_folds, leave_one_out,
+                                          prepare_for_cv)
+from mixture_ip_ros.core.scores import controlled_rms
+from mixture_ip_ros.core.selection import loo_rms_by_components
 from mixture_ip_ros.scenarios.synthetic import mixture_demos
 
 
@@ -79,6 +81,36 @@ def occluded(demos, seed=0):
             obs[lo:lo + len(d.t) // 5] = np.nan
         out.append(Demonstration(d.t, obs, d.controlled, label=d.label))
     return out
+
+
+def test_folds_hold_out_every_demonstration_once_and_train_on_the_rest():
+    """k seeded folds and leave-one-out: each fold's held-out and training indices split the
+    demonstrations, every demonstration is held out exactly once (leave-one-out: the ones
+    asked for), and the fold loop gives each fold's and setting's score in that order, the
+    same on any number of threads, a fold that cannot hold the model as None."""
+    for n, n_folds in ((19, 5), (7, 5), (3, 5), (10, 10)):
+        folds = k_folds(n, n_folds, 0)
+        assert len(folds) == min(n, n_folds)
+        assert np.array_equal(np.sort(np.concatenate([f.test for f in folds])), np.arange(n))
+        for f, fold in enumerate(folds):
+            assert np.array_equal(fold.test, np.flatnonzero(cv_folds(n, n_folds, 0) == f))
+            assert np.array_equal(np.union1d(fold.train, fold.test), np.arange(n))
+            assert not np.intersect1d(fold.train, fold.test).size
+    loo = leave_one_out(6, [4, 1])
+    assert [f.test.tolist() for f in loo] == [[4], [1]]
+    assert [f.train.tolist() for f in loo] == [[0, 1, 2, 3, 5], [0, 2, 3, 4, 5]]
+
+    def fit(fold, K):
+        return None if len(fold.train) < K else (K, fold.train.sum())
+
+    def score(model, fold, K):
+        return model[1] * K + fold.test.sum()
+    folds = k_folds(9, 3, 1)
+    want = [None if len(f.train) < K else f.train.sum() * K + f.test.sum()
+            for f in folds for K in (1, 7)]
+    for n_jobs in (1, 3):
+        assert fold_scores(folds, fit, score, (1, 7), n_jobs=n_jobs) == want
+    assert want.count(None) == 3
 
 
 def test_kmeans_gives_the_labels_of_the_plain_loop():
@@ -162,7 +194,7 @@ def test_training_is_the_same_on_one_thread_or_several_and_its_folds_are_plain_f
     from mixture_ip_ros.app.training import train_to_file
     from mixture_ip_ros.core.demonstration import Layout
     from mixture_ip_ros.core.novelty import calibrate
-    from mixture_ip_ros.core.online import SPEED_WEIGHTS, speed_log_scores
+    from mixture_ip_ros.core.calibration import SPEED_WEIGHTS, speed_log_scores
     demos = mixture_demos(seed=2, n_obs=2, n_ctrl=1, counts=(6, 7, 6))[0]
     layout = Layout(('x', 'y'), ('c',))
     runs = [train_to_file(demos, tmp_path / f'm{j}.npz', layout=layout, candidates=(1, 2, 3, 4),

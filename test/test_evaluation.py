@@ -9,7 +9,7 @@ from matplotlib import image as mpimg
 
 from mixture_ip_ros.scenarios.box_assembly import box_assembly
 from mixture_ip_ros.scenarios.folders import write_scenario_bags
-from mixture_ip_ros.app.evaluation import EvalConfig, evaluate, prepare
+from mixture_ip_ros.app.evaluation import EvalConfig, evaluate, subsampled
 
 # Thesis 3.4.2: hand position error, mean (cm), leave-one-out.
 THESIS_HAND_ERROR_CM = {'plate': 3.2, 'screwdriver': 2.1}
@@ -153,9 +153,9 @@ def test_box_assembly_of_another_arm_uses_its_joints_and_kinematics(tmp_path):
         evaluate('phase', tmp_path / 'phase', robot='ur5')
 
 
-def test_prepare_keeps_the_final_sample():
+def test_subsampling_keeps_the_final_sample():
     demo = [g.to_demonstration() for g in box_assembly(0, counts={'plate': 1})][0]
-    sub = prepare([demo], 4)[0]
+    sub = subsampled([demo], 4)[0]
     assert sub.t[-1] == demo.t[-1]
     assert np.array_equal(sub.observed[-1], demo.observed[-1])
     assert np.array_equal(sub.t[:-1], demo.t[::4][:sub.t.size - 1])

@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from mixture_ip_ros.app.evaluation import evaluate
-from mixture_ip_ros.app.evaluation.common import (decimated_rows, online_component_given_end,
+from mixture_ip_ros.app.evaluation.common import (online_component_given_end,
                                                   phase_known_components)
 from mixture_ip_ros.core.mixture import MixtureIProMP
+from mixture_ip_ros.core.noise import decimated_rows
 from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.scenarios.synthetic import mixture_demos
 from mixture_ip_ros.io.ucr import read_ts

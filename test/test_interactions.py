@@ -191,4 +191,4 @@ def test_training_cuts_the_recordings_where_their_authors_did(data, tmp_path):
         del custom[ONSET_KEY], custom[END_KEY]
         path.write_text(yaml.safe_dump(meta))
     with pytest.raises(ValueError, match='remove .* to write them again'):
-        app.prepare(tmp_path / 'bags', tmp_path / 'out', 'iiwa14')
+        app.prepare_interactions_demo(tmp_path / 'bags', tmp_path / 'out', 'iiwa14')

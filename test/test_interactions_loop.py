@@ -24,7 +24,7 @@ def report(tmp_path_factory):
         pytest.skip('NuiSI is not in the user cache (./dev seeds it from ../shared/data/nuisi)')
     from mixture_ip_ros.app import interactions as app
     root = tmp_path_factory.mktemp('interactions')
-    scene, model_path, info = app.prepare(root / 'bags', root, 'iiwa14')
+    scene, model_path, info = app.prepare_interactions_demo(root / 'bags', root, 'iiwa14')
     shortest = {}
     for r in nuisi.recordings('v2', 'test'):
         if r.label not in shortest or len(r.t) < len(shortest[r.label].t):

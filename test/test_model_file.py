@@ -179,22 +179,24 @@ def test_a_failed_save_leaves_the_previous_model_whole(tmp_path, fitted, monkeyp
 def test_the_phase_warps_round_trip_and_a_file_without_them_keeps_the_linear_phase(tmp_path,
                                                                                      fitted):
     from mixture_ip_ros.core.warp import N_WARP
+    from mixture_ip_ros.core.warped import PhaseWarps
     model, demos = fitted
     named = [copy.copy(d) for d in demos]
     named[4].name = 'rec4'
-    warped = copy.copy(model).fit_warps(named)
-    warped.warp_failed_ = ['rec4']                 # as training names a fit that failed
+    warped = copy.copy(model)
+    warped.warps_ = PhaseWarps().fit(model, named)
+    warped.warps_.failed_ = ['rec4']               # as training names a fit that failed
     path = save_model(tmp_path / 'w.npz', warped, observed_names=OBS, controlled_names=CTRL)
     loaded, meta = load_model(path)
-    assert np.array_equal(loaded.warp_mean_, warped.warp_mean_)
-    assert np.array_equal(loaded.warp_sd_, warped.warp_sd_)
-    assert loaded.warp_failed_ == ['rec4'] and meta['warp_failed'] == ['rec4']
+    assert np.array_equal(loaded.warps_.mean_, warped.warps_.mean_)
+    assert np.array_equal(loaded.warps_.sd_, warped.warps_.sd_)
+    assert loaded.warps_.failed_ == ['rec4'] and meta['warp_failed'] == ['rec4']
     d = demos[1]
-    assert np.array_equal(loaded.warped_component_posterior(d.phase, d.observed)[0],
-                          warped.warped_component_posterior(d.phase, d.observed)[0])
+    assert np.array_equal(loaded.warps_.component_posterior(loaded, d.phase, d.observed)[0],
+                          warped.warps_.component_posterior(warped, d.phase, d.observed)[0])
     plain = save_model(tmp_path / 'p.npz', model, observed_names=OBS, controlled_names=CTRL)
     linear = load_model(plain)[0]
-    assert linear.warp_mean_ is None and linear.warp_sd_ is None and linear.warp_failed_ == []
+    assert linear.warps_ is None
     assert 'warp_mean' not in _arrays(plain)
     for bad, message in ((dict(warp_sd=np.zeros((3, N_WARP))), 'positive warp_sd'),
                          (dict(warp_mean=np.zeros((2, N_WARP))), 'shape'),

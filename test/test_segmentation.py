@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from mixture_ip_ros.core.segmentation import (
-    Event, fit_cubic_onset, MotionSegmenter, segment_motion)
+from mixture_ip_ros.core.cubic_onset import fit_cubic_onset
+from mixture_ip_ros.core.segmentation import Event, MotionSegmenter, segment_motion
 
 T_ABS = 1.7e9  # realistic epoch stamps: exercises the running sums' precision
 

@@ -8,7 +8,8 @@ import pytest
 
 from mixture_ip_ros.core.basis import GaussianBasis
 from mixture_ip_ros.core.demonstration import Demonstration
-from mixture_ip_ros.app.training import text_progress, train
+from mixture_ip_ros.app.progress import text_progress
+from mixture_ip_ros.app.training import train
 
 from mixture_ip_ros.scenarios.synthetic import mixture_demos, random_spd
 
@@ -152,7 +153,8 @@ def test_em_training_of_demonstrations_missing_an_agent_keeps_the_configured_spe
 def test_training_says_where_its_time_went_stage_by_stage(tmp_path):
     """Every stage's time in the summary, in order; shown as a line when it ends (and its name
     when it starts, on a terminal)."""
-    from mixture_ip_ros.app.training import Stages, text_stages, train_to_file
+    from mixture_ip_ros.app.progress import Stages, text_stages
+    from mixture_ip_ros.app.training import train_to_file
     from mixture_ip_ros.core.demonstration import Layout
     from mixture_ip_ros.scenarios.synthetic import mixture_demos
     demos = mixture_demos(seed=1, n_obs=1, n_ctrl=1, counts=(5, 5, 5))[0]
@@ -175,7 +177,7 @@ def test_training_says_where_its_time_went_stage_by_stage(tmp_path):
 def test_training_refuses_what_would_make_its_threads_or_shared_preparation_lie():
     """A preparation of other demonstrations or parameters, a number of threads that is not
     one, a random generator the folds' threads would share: each refused by name."""
-    from mixture_ip_ros.core.selection import prepare_for_cv
+    from mixture_ip_ros.core.crossval import prepare_for_cv
     demos = mixture_demos(seed=0)[0][:12]
     prepared = prepare_for_cv(demos, {'n_basis': 8})
     for kwargs in ({'n_basis': 6}, {'n_basis': 8, 'smoothing': 0.5}):
@@ -198,5 +200,5 @@ def test_training_keeps_the_warps_only_where_they_predict_held_out_recordings_be
         model, info = train(recordings_at_warps(spread, seed=13), n_components=2, n_basis=8)
         assert info['phase']['chosen'] == chosen
         assert (info['phase']['held_out_gain'] > 0) == (chosen == 'warped')
-        assert (model.warp_mean_ is not None) == (chosen == 'warped')
+        assert (model.warps_ is not None) == (chosen == 'warped')
         assert ('phase warps' in info['seconds']) == (chosen == 'warped')

@@ -77,7 +77,8 @@ def _generate(args):
 
 
 def _train(args):
-    from mixture_ip_ros.app.training import Stages, text_progress, text_stages, train_to_file
+    from mixture_ip_ros.app.progress import Stages, text_progress, text_stages
+    from mixture_ip_ros.app.training import train_to_file
     from mixture_ip_ros.robot.description import load_description
     robot = load_description(args.robot)
     kwargs = {'n_basis': args.n_basis, 'method': args.method, 'criterion': args.criterion,

@@ -25,7 +25,8 @@ from mixture_ip_ros.io.files import write_text_atomic
 from mixture_ip_ros.scenarios.folders import read_labels, read_scenario_robot, write_scenario_bags
 from mixture_ip_ros.robot.description import DEFAULT_ROBOT, load_description
 from mixture_ip_ros.robot.kinematics import RobotKinematics
-from mixture_ip_ros.app.training import text_progress, train_to_file
+from mixture_ip_ros.app.progress import text_progress
+from mixture_ip_ros.app.training import train_to_file
 
 log = logging.getLogger('mixture_ip_ros.app.demo')
 
@@ -57,8 +58,8 @@ def default_paths(robot) -> tuple:
     return root / 'box_assembly_bags', root / 'demo'
 
 
-def prepare(data_dir: Path, out_dir: Path, held_out: int, seed: int, n_components=None,
-            robot=None):
+def prepare_box_demo(data_dir: Path, out_dir: Path, held_out: int, seed: int,
+                     n_components=None, robot=None):
     """Bags for ``robot`` (generated if missing), the held-out split and a trained model file."""
     robot = load_description(robot)
     if not data_dir.is_dir() or not any(data_dir.iterdir()):
@@ -91,8 +92,8 @@ def run_demo(args):
     data_dir = Path(args.data) if args.data else default_data
     out_dir = Path(args.out) if args.out else default_out
     out_dir.mkdir(parents=True, exist_ok=True)
-    labels, held, model_path, info = prepare(data_dir, out_dir, args.held_out, args.seed,
-                                             n_components=args.components, robot=robot)
+    labels, held, model_path, info = prepare_box_demo(
+        data_dir, out_dir, args.held_out, args.seed, n_components=args.components, robot=robot)
     print(f"{robot.name}: trained on {info['n_demonstrations']} demonstrations: "
           f"K = {info['n_components']}"
           + (f" (leave-one-out RMS by K: {np.round(info['loo_rms_mean'], 4).tolist()})"

@@ -23,8 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
-from mixture_ip_ros.app.training import text_progress, train_to_file
-from mixture_ip_ros.core.online import OnlineEstimator, played_to
+from mixture_ip_ros.app.progress import text_progress
+from mixture_ip_ros.app.training import train_to_file
+from mixture_ip_ros.core.online import OnlineEstimator
+from mixture_ip_ros.core.playback import played_to
 from mixture_ip_ros.io.bags import read_bag
 from mixture_ip_ros.io.dataset import (NoRecordedInterval, load_dataset, load_demonstration,
                                        segment_recording)
@@ -50,7 +52,7 @@ def loading(scene, cut: str = 'recorded') -> dict:
     the recordings' rate; cut where NuiSI's authors cut the interaction (``'recorded'``, for
     training: the observer's ends, which only set a training demonstration's duration, come up
     to a second early where a person slows down before the annotated end, and with them the
-    rocket fist-bumps split in two and K = 2 was chosen), or where the observer finds the
+    rocket fist bumps split in two), or where the observer finds the
     movement with the scenario's settings (``'detected'``: what the nodes see online)."""
     robot = scene.robot
     return {'transform': robot.world_to_base(), 'joint_names': robot.joint_names,
@@ -58,8 +60,8 @@ def loading(scene, cut: str = 'recorded') -> dict:
             'dt': 1.0 / nuisi.VERSIONS[scene.config.data].rate}
 
 
-def prepare(data_dir: Path, out_dir: Path, robot=None, n_components=None,
-            supervised: bool = False):
+def prepare_interactions_demo(data_dir: Path, out_dir: Path, robot=None, n_components=None,
+                              supervised: bool = False):
     """The scene, the bags of both splits (written if missing), a model trained on the
     training split (K = ``n_components``, or chosen; ``supervised``: one component per
     interaction, the labels read, a reference for benches and tests) and its training summary:
@@ -206,7 +208,8 @@ def run(args):
     data_dir = Path(args.data) if args.data else default_data
     out_dir = Path(args.out) if args.out else default_out
     out_dir.mkdir(parents=True, exist_ok=True)
-    scene, model_path, info = prepare(data_dir, out_dir, robot, n_components=args.components)
+    scene, model_path, info = prepare_interactions_demo(data_dir, out_dir, robot,
+                                                        n_components=args.components)
     print(f'{robot.name}: reach scale {scene.placement.scale:.3f}; trained on '
           f'{info["n_demonstrations"]} demonstrations: K = {info["n_components"]}'
           + (f' (leave-one-out RMS by K: {np.round(info["loo_rms_mean"], 4).tolist()})'

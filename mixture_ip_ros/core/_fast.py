@@ -14,12 +14,12 @@ S = L L^T (P x P) and applies G = L^-1 H Sigma, Sigma -= G^T G, which keeps Sigm
 definite over thousands of updates (the textbook K H Sigma form drifts). Cost O(P d^2) per
 hypothesis.
 
-Layout: hypotheses (columns) in groups of W = 8 lanes, each group contiguous, so one SIMD
-register holds one entry of eight hypotheses and a group's state (d (d + 1) / 2 W doubles)
-is streamed once per pass. Sigma is stored as its lower triangle only (symmetric by
-construction, half the update): entry (i, j), j <= i, of column c = g W + l is
-cov[g, (i (i + 1) / 2 + j) W + l]; mu[g, i W + l] is entry i of its mean. The columns of the
-groups past the tracked ones, and the lanes past them in the last group, hold valid states
+Layout: hypotheses (columns) in groups of LANES = 8, each group contiguous, so one SIMD
+register holds one entry of eight hypotheses and a group's state (d (d + 1) / 2 LANES
+doubles) is streamed once per pass. Sigma is stored as its lower triangle only (symmetric by
+construction, half the update): entry (i, j), j <= i, of column c = g LANES + l is
+cov[g, (i (i + 1) / 2 + j) LANES + l]; mu[g, i LANES + l] is entry i of its mean. The columns
+of the groups past the tracked ones, and the lanes past them in the last group, hold valid states
 that are updated with the others and never read (see OnlineEstimator's pruning).
 
 Every kernel of the layer is in this one file: numba's cache of a kernel is invalidated by
@@ -45,19 +45,19 @@ _LOG_2PI = float(np.log(2.0 * np.pi))
 # writes two outputs, stays scalar; with an explicit lane type the kernel holds eight
 # hypotheses' values in one register and reuses it. LLVM lowers the type to what the CPU has
 # (one AVX-512 register, two AVX2 ones, four SSE2/NEON ones). In compiled code only:
-# vload(a, i) / vstore(a, i, v) read / write a[i:i + W] of a 1-D C-contiguous float64 array
-# without bounds checks (the caller keeps i + W <= len(a)); vsplat(x) has x in every lane;
+# vload(a, i) / vstore(a, i, v) read / write a[i:i + LANES] of a 1-D C-contiguous float64 array
+# without bounds checks (the caller keeps i + LANES <= len(a)); vsplat(x) has x in every lane;
 # +, -, *, / are lane-wise and may fuse a multiply-add (as fastmath={'contract'}); vsqrt is the
 # lane-wise square root.
 
-W = 8
-_LANES = ir.VectorType(ir.DoubleType(), W)
+LANES = 8
+_LANE_VECTOR = ir.VectorType(ir.DoubleType(), LANES)
 _CONTRACT = ('contract',)
 
 
 class _VecType(types.Type):
     def __init__(self):
-        super().__init__(name=f'f64x{W}')
+        super().__init__(name=f'f64x{LANES}')
 
 
 vec = _VecType()
@@ -66,7 +66,7 @@ vec = _VecType()
 @register_model(_VecType)
 class _VecModel(models.PrimitiveModel):
     def __init__(self, dmm, fe_type):
-        super().__init__(dmm, fe_type, _LANES)
+        super().__init__(dmm, fe_type, _LANE_VECTOR)
 
 
 def _is_row(a):
@@ -76,7 +76,7 @@ def _is_row(a):
 
 def _lanes_pointer(context, builder, aryty, ary, i):
     data = context.make_array(aryty)(context, builder, ary).data
-    return builder.bitcast(builder.gep(data, [i]), _LANES.as_pointer())
+    return builder.bitcast(builder.gep(data, [i]), _LANE_VECTOR.as_pointer())
 
 
 @intrinsic
@@ -109,10 +109,10 @@ def vsplat(typingctx, x):
 
     def codegen(context, builder, sig, args):
         x = context.cast(builder, args[0], sig.args[0], types.float64)
-        one = builder.insert_element(ir.Constant(_LANES, ir.Undefined), x,
+        one = builder.insert_element(ir.Constant(_LANE_VECTOR, ir.Undefined), x,
                                      ir.Constant(ir.IntType(32), 0))
-        return builder.shuffle_vector(one, one, ir.Constant(ir.VectorType(ir.IntType(32), W),
-                                                             [0] * W))
+        return builder.shuffle_vector(one, one, ir.Constant(ir.VectorType(ir.IntType(32), LANES),
+                                                             [0] * LANES))
     return vec(x), codegen
 
 
@@ -122,8 +122,9 @@ def vsqrt(typingctx, v):
         return None
 
     def codegen(context, builder, sig, args):
-        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(_LANES, [_LANES]),
-                                            f'llvm.sqrt.v{W}f64')
+        fn = cgutils.get_or_insert_function(builder.module,
+                                            ir.FunctionType(_LANE_VECTOR, [_LANE_VECTOR]),
+                                            f'llvm.sqrt.v{LANES}f64')
         return builder.call(fn, [args[0]])
     return vec(v), codegen
 
@@ -174,16 +175,17 @@ def basis_rows(z, centers, width):
 
 
 def to_lanes(columns):
-    """Per-column rows (C, m), C a multiple of W, to kalman_update's lane groups (C / W, m W)."""
+    """Per-column rows (C, m), C a multiple of LANES, to kalman_update's lane groups
+    (C / LANES, m LANES)."""
     C, m = columns.shape
-    return np.ascontiguousarray(columns.reshape(C // W, W, m).transpose(0, 2, 1)).reshape(
-        C // W, m * W)
+    return np.ascontiguousarray(columns.reshape(C // LANES, LANES, m).transpose(0, 2, 1)
+                                ).reshape(C // LANES, m * LANES)
 
 
 def from_lanes(groups):
     """Inverse of to_lanes (a copy)."""
     G, mW = groups.shape
-    return groups.reshape(G, mW // W, W).transpose(0, 2, 1).reshape(G * W, mW // W)
+    return groups.reshape(G, mW // LANES, LANES).transpose(0, 2, 1).reshape(G * LANES, mW // LANES)
 
 
 def tri_index(d):
@@ -210,38 +212,40 @@ def kalman_update(cov, mu, loglik, n, alpha_index, alphas, times, centers, width
     caller needs to read between them, e.g. log p(D)); its other columns are not written.
     Returns the smallest posterior probability of a tracked hypothesis.
 
-    Each group of W columns takes every observation before the next group starts: a group's
-    state (d (d + 1) / 2 W doubles, 66 kB at d = 45) stays in the core's cache for all of them,
-    where one observation at a time streams every group's state through memory once per
-    observation (1.2 MB at 150 hypotheses, more than a core's L2). Each column's arithmetic
-    and its order are those of J calls with one observation each, so the result is the same to
-    the bit; only the posterior in between is not computed (pruning needs it after each one).
+    Each group of LANES columns takes every observation before the next group starts: a
+    group's state (d (d + 1) / 2 LANES doubles, 66 kB at d = 45) stays in the core's cache for
+    all of them, where one observation at a time streams every group's state through memory
+    once per observation (1.2 MB at 150 hypotheses, more than a core's L2). Each column's
+    arithmetic and its order are those of J calls with one observation each, so the result is
+    the same to the bit; only the posterior in between is not computed (pruning needs it after
+    each one).
 
-    cov (groups, d (d + 1) / 2 W), mu (groups, d W) (see the module's layout); per column c:
-    loglik[c], phase speed alphas[alpha_index[c]] (H = I_P kron psi(alpha t)^T, eq. 15 with
-    ``centers``, ``width``), log_prior[c], and which hypothesis it is, hypothesis[c]; noise
-    (groups, P W) = diag R of each column, in the lane layout (tied across components or not).
+    cov (groups, d (d + 1) / 2 LANES), mu (groups, d LANES) (see the module's layout); per
+    column c: loglik[c], phase speed alphas[alpha_index[c]] (H = I_P kron psi(alpha t)^T, eq.
+    15 with ``centers``, ``width``), log_prior[c], and which hypothesis it is, hypothesis[c];
+    noise (groups, P LANES) = diag R of each column, in the lane layout (tied across
+    components or not).
     joint (K M,): p(k, alpha_m | D) renormalised over the tracked hypotheses, 0 for the others.
     """
-    d = mu.shape[1] // W
+    d = mu.shape[1] // LANES
     J, P = ys.shape
     N = centers.shape[0]
     # Basis rows once per (observation, phase speed in use), the lanes past the n-th column
     # in the last group included: they are updated with the others and must stay valid.
     used = np.zeros(alphas.shape[0], dtype=np.bool_)
-    for c in range(-(-n // W) * W):
+    for c in range(-(-n // LANES) * LANES):
         used[alpha_index[c]] = True
     psi = np.empty((J, alphas.shape[0], N))
     for j in range(J):
         for a in range(alphas.shape[0]):
             if used[a]:
                 _basis_row(alphas[a] * times[j], centers, width, psi[j, a])
-    phi = np.empty(N * W)
+    phi = np.empty(N * LANES)
     n_rows = -(-P // 3) * 3                    # G in groups of three rows (extra rows zero)
-    G = np.zeros(n_rows * d * W)
-    L = np.empty(P * P * W)
-    r = np.empty(P * W)
-    for g in range(-(-n // W)):
+    G = np.zeros(n_rows * d * LANES)
+    L = np.empty(P * P * LANES)
+    r = np.empty(P * LANES)
+    for g in range(-(-n // LANES)):
         cov_g = cov[g]
         mu_g = mu[g]
         noise_g = noise[g]
@@ -249,8 +253,8 @@ def kalman_update(cov, mu, loglik, n, alpha_index, alphas, times, centers, width
             y = ys[obs]
             _absorb_one(cov_g, mu_g, noise_g, loglik, g, alpha_index, psi[obs], y, phi, G, L,
                         r, d, P, N, n_rows)
-            for lane in range(W):
-                trace[obs, g * W + lane] = loglik[g * W + lane]
+            for lane in range(LANES):
+                trace[obs, g * LANES + lane] = loglik[g * LANES + lane]
     # Posterior over the tracked hypotheses (eq. 16 with the mixture weight in the prior).
     top = -np.inf
     for c in range(n):
@@ -271,12 +275,12 @@ def kalman_update(cov, mu, loglik, n, alpha_index, alphas, times, centers, width
 @numba.njit(cache=True, nogil=True, fastmath={'contract'}, boundscheck=False, inline='always')
 def _absorb_one(cov_g, mu_g, noise_g, loglik, g, alpha_index, psi, y, phi, G, L, r, d, P, N,
                 n_rows):
-    """One observation ``y`` for the W columns of group g (kalman_update's body): ``psi``
+    """One observation ``y`` for the LANES columns of group g (kalman_update's body): ``psi``
     (M, N) holds the basis row at its time of each phase speed in use."""
-    for lane in range(W):
-        a = alpha_index[g * W + lane]
+    for lane in range(LANES):
+        a = alpha_index[g * LANES + lane]
         for k in range(N):
-            phi[k * W + lane] = psi[a, k]
+            phi[k * LANES + lane] = psi[a, k]
     # H Sigma: G[p, j] = sum_k psi_k Sigma[pN + k, j], four columns j per pass.
     for p in range(P):
         j = 0
@@ -285,116 +289,118 @@ def _absorb_one(cov_g, mu_g, noise_g, loglik, g, alpha_index, psi, y, phi, G, L,
                 a0 = a1 = a2 = a3 = vsplat(0.0)
                 for k in range(N):
                     i = p * N + k
-                    f = vload(phi, k * W)
-                    a0 = a0 + f * vload(cov_g, _tri(i, j) * W)
-                    a1 = a1 + f * vload(cov_g, _tri(i, j + 1) * W)
-                    a2 = a2 + f * vload(cov_g, _tri(i, j + 2) * W)
-                    a3 = a3 + f * vload(cov_g, _tri(i, j + 3) * W)
-                o = (p * d + j) * W
+                    f = vload(phi, k * LANES)
+                    a0 = a0 + f * vload(cov_g, _tri(i, j) * LANES)
+                    a1 = a1 + f * vload(cov_g, _tri(i, j + 1) * LANES)
+                    a2 = a2 + f * vload(cov_g, _tri(i, j + 2) * LANES)
+                    a3 = a3 + f * vload(cov_g, _tri(i, j + 3) * LANES)
+                o = (p * d + j) * LANES
                 vstore(G, o, a0)
-                vstore(G, o + W, a1)
-                vstore(G, o + 2 * W, a2)
-                vstore(G, o + 3 * W, a3)
+                vstore(G, o + LANES, a1)
+                vstore(G, o + 2 * LANES, a2)
+                vstore(G, o + 3 * LANES, a3)
                 j += 4
             else:
                 a0 = vsplat(0.0)
                 for k in range(N):
-                    a0 = a0 + vload(phi, k * W) * vload(cov_g, _tri(p * N + k, j) * W)
-                vstore(G, (p * d + j) * W, a0)
+                    a0 = a0 + vload(phi, k * LANES) * vload(cov_g, _tri(p * N + k, j) * LANES)
+                vstore(G, (p * d + j) * LANES, a0)
                 j += 1
     # S = H Sigma H^T + R (lower half) and the residual y - H mu.
     for p in range(P):
         for q in range(p + 1):
-            a0 = vload(noise_g, p * W) if q == p else vsplat(0.0)
+            a0 = vload(noise_g, p * LANES) if q == p else vsplat(0.0)
             for k in range(N):
-                a0 = a0 + vload(G, (p * d + q * N + k) * W) * vload(phi, k * W)
-            vstore(L, (p * P + q) * W, a0)
+                a0 = a0 + vload(G, (p * d + q * N + k) * LANES) * vload(phi, k * LANES)
+            vstore(L, (p * P + q) * LANES, a0)
         a0 = vsplat(y[p])
         for k in range(N):
-            a0 = a0 - vload(phi, k * W) * vload(mu_g, (p * N + k) * W)
-        vstore(r, p * W, a0)
+            a0 = a0 - vload(phi, k * LANES) * vload(mu_g, (p * N + k) * LANES)
+        vstore(r, p * LANES, a0)
     # S = L L^T in place.
     for i in range(P):
         for j in range(i + 1):
-            a0 = vload(L, (i * P + j) * W)
+            a0 = vload(L, (i * P + j) * LANES)
             for q in range(j):
-                a0 = a0 - vload(L, (i * P + q) * W) * vload(L, (j * P + q) * W)
+                a0 = a0 - vload(L, (i * P + q) * LANES) * vload(L, (j * P + q) * LANES)
             if i == j:
                 a0 = vsqrt(a0)
             else:
-                a0 = a0 / vload(L, (j * P + j) * W)
-            vstore(L, (i * P + j) * W, a0)
+                a0 = a0 / vload(L, (j * P + j) * LANES)
+            vstore(L, (i * P + j) * LANES, a0)
     # G = L^-1 H Sigma and r = L^-1 (y - H mu) in place.
     for p in range(P):
-        inv = vsplat(1.0) / vload(L, (p * P + p) * W)
+        inv = vsplat(1.0) / vload(L, (p * P + p) * LANES)
         for j in range(d):
-            a0 = vload(G, (p * d + j) * W)
+            a0 = vload(G, (p * d + j) * LANES)
             for q in range(p):
-                a0 = a0 - vload(L, (p * P + q) * W) * vload(G, (q * d + j) * W)
-            vstore(G, (p * d + j) * W, a0 * inv)
-        a0 = vload(r, p * W)
+                a0 = a0 - vload(L, (p * P + q) * LANES) * vload(G, (q * d + j) * LANES)
+            vstore(G, (p * d + j) * LANES, a0 * inv)
+        a0 = vload(r, p * LANES)
         for q in range(p):
-            a0 = a0 - vload(L, (p * P + q) * W) * vload(r, q * W)
-        vstore(r, p * W, a0 * inv)
+            a0 = a0 - vload(L, (p * P + q) * LANES) * vload(r, q * LANES)
+        vstore(r, p * LANES, a0 * inv)
     # log N(y; H mu, S) = -(P log 2 pi + log det S + |r|^2) / 2, det S = prod L_pp^2.
-    for lane in range(W):
+    for lane in range(LANES):
         logdet, quad, prod = 0.0, 0.0, 1.0
         for p in range(P):
-            prod *= L[(p * P + p) * W + lane]
+            prod *= L[(p * P + p) * LANES + lane]
             if p % 8 == 7 or p == P - 1:   # L_pp^2 >= min(noise): 8 factors cannot underflow
                 logdet += 2.0 * np.log(prod)
                 prod = 1.0
-            quad += r[p * W + lane] ** 2
-        loglik[g * W + lane] += -0.5 * (P * _LOG_2PI + logdet + quad)
+            quad += r[p * LANES + lane] ** 2
+        loglik[g * LANES + lane] += -0.5 * (P * _LOG_2PI + logdet + quad)
     # mu += G^T r
     for i in range(d):
-        a0 = vload(mu_g, i * W)
+        a0 = vload(mu_g, i * LANES)
         for p in range(P):
-            a0 = a0 + vload(G, (p * d + i) * W) * vload(r, p * W)
-        vstore(mu_g, i * W, a0)
+            a0 = a0 + vload(G, (p * d + i) * LANES) * vload(r, p * LANES)
+        vstore(mu_g, i * LANES, a0)
     # Sigma -= G^T G on the lower triangle: three rows of G, rows i and i + 1 of Sigma per
     # pass (they share the loads of G[:, j]).
     for c in range(0, n_rows, 3):
-        g0, g1, g2 = c * d * W, (c + 1) * d * W, (c + 2) * d * W
+        g0, g1, g2 = c * d * LANES, (c + 1) * d * LANES, (c + 2) * d * LANES
         i = 0
         while i < d:
-            a0, a1, a2 = vload(G, g0 + i * W), vload(G, g1 + i * W), vload(G, g2 + i * W)
+            a0 = vload(G, g0 + i * LANES)
+            a1 = vload(G, g1 + i * LANES)
+            a2 = vload(G, g2 + i * LANES)
             base = i * (i + 1) // 2
             if i + 1 < d:
-                e0 = vload(G, g0 + (i + 1) * W)
-                e1 = vload(G, g1 + (i + 1) * W)
-                e2 = vload(G, g2 + (i + 1) * W)
+                e0 = vload(G, g0 + (i + 1) * LANES)
+                e1 = vload(G, g1 + (i + 1) * LANES)
+                e2 = vload(G, g2 + (i + 1) * LANES)
                 for j in range(i + 1):
-                    b0 = vload(G, g0 + j * W)
-                    b1 = vload(G, g1 + j * W)
-                    b2 = vload(G, g2 + j * W)
-                    o = (base + j) * W
+                    b0 = vload(G, g0 + j * LANES)
+                    b1 = vload(G, g1 + j * LANES)
+                    b2 = vload(G, g2 + j * LANES)
+                    o = (base + j) * LANES
                     vstore(cov_g, o, vload(cov_g, o) - (a0 * b0 + a1 * b1 + a2 * b2))
-                    o += (i + 1) * W                     # entry (i + 1, j)
+                    o += (i + 1) * LANES                     # entry (i + 1, j)
                     vstore(cov_g, o, vload(cov_g, o) - (e0 * b0 + e1 * b1 + e2 * b2))
-                o = (base + 2 * i + 2) * W              # entry (i + 1, i + 1)
+                o = (base + 2 * i + 2) * LANES              # entry (i + 1, i + 1)
                 vstore(cov_g, o, vload(cov_g, o) - (e0 * e0 + e1 * e1 + e2 * e2))
                 i += 2
             else:
                 for j in range(i + 1):
-                    b0 = vload(G, g0 + j * W)
-                    b1 = vload(G, g1 + j * W)
-                    b2 = vload(G, g2 + j * W)
-                    o = (base + j) * W
+                    b0 = vload(G, g0 + j * LANES)
+                    b1 = vload(G, g1 + j * LANES)
+                    b2 = vload(G, g2 + j * LANES)
+                    o = (base + j) * LANES
                     vstore(cov_g, o, vload(cov_g, o) - (a0 * b0 + a1 * b1 + a2 * b2))
                 i += 1
 
 
 @numba.njit(cache=True, nogil=True, boundscheck=False)
 def compact_lanes(a, src):
-    """In place: column k of the lane-grouped ``a`` (groups, m W) becomes column src[k]
+    """In place: column k of the lane-grouped ``a`` (groups, m LANES) becomes column src[k]
     (src increasing, so no column is overwritten before it is moved)."""
-    m = a.shape[1] // W
+    m = a.shape[1] // LANES
     for k in range(src.shape[0]):
         s = src[k]
         if s != k:
             for e in range(m):
-                a[k // W, e * W + k % W] = a[s // W, e * W + s % W]
+                a[k // LANES, e * LANES + k % LANES] = a[s // LANES, e * LANES + s % LANES]
 
 
 @numba.njit(cache=True, nogil=True, fastmath=False, boundscheck=False)

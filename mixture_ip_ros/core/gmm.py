@@ -1,7 +1,8 @@
 """The EM steps of a Gaussian mixture over weight vectors (thesis eqs. 6-10), as pure functions:
 the components' log densities, the responsibilities (eq. 7), the M step with the conjugate
-covariance prior (eqs. 8-10) and that prior's log density, the noise M step (eq. 15), and the
-E step with latent weights for demonstrations with missing data (eqs. 21, 27-28)."""
+covariance prior (eqs. 8-10), that prior's shrinkage target and its log density, the noise M
+step (eq. 15), and the E step with latent weights for demonstrations with missing data
+(eqs. 21, 27-28)."""
 
 import numpy as np
 from scipy import linalg
@@ -58,6 +59,27 @@ def gmm_maximization(W, resp, prior_cov, prior_strength, extra_cov=None):
             S += np.einsum('i,ide->de', resp[:, k], extra_cov[:, k])
         covs[k] = _regularised_cov(S, nk[k], np.asarray(prior_cov), prior_strength)
     return weights, means, covs
+
+
+def covariance_prior(W, clusters, n_components: int, floor_scale: float, pooled: bool = True):
+    """The shrinkage target Omega (d, d) of every component covariance (the conjugate prior of
+    eqs. 8-10) from the weights W (n, d) and the initial clusters (n,) in 0..n_components-1:
+    the within-cluster covariance pooled over the clusters (``pooled``; the shape variability
+    shared by all patterns) plus a diagonal floor. A component with a dozen members then
+    borrows the pooled structure instead of trusting spurious correlations of its own sample
+    covariance. The floor is ``floor_scale`` times each weight's variance within the clusters,
+    not over all demonstrations: the spread between patterns is no part of any one component's
+    variability, and a floor that contains it blurs every component by the distance between
+    them (with one cluster both are the same)."""
+    n = len(W)
+    w_var = np.maximum(W.var(axis=0), 1e-12)
+    E = W - np.array([W[clusters == k].mean(axis=0) if np.any(clusters == k)
+                      else W.mean(axis=0) for k in range(n_components)])[clusters]
+    floor = floor_scale * np.maximum((E ** 2).mean(axis=0), 1e-12 * w_var.max())
+    prior = np.diag(floor)
+    if pooled:
+        prior += E.T @ E / n
+    return prior
 
 
 def covariance_penalty_of_m_step(chols, resp, maha, d, prior_strength):

@@ -3,21 +3,11 @@ first) and the controlled agent (Q DOFs); conditioning on the observed agent (eq
 the resulting distribution over trajectories of every DOF (eq. 3), with velocities.
 """
 
-from dataclasses import dataclass
-
 import numpy as np
 from scipy import linalg
 
 from .basis import GaussianBasis
 from .promp import block_diag_info, observation_stats
-
-
-@dataclass
-class WeightGaussian:
-    """N(mean, cov) over stacked weights [w_o (P*N), w_c (Q*N)]."""
-
-    mean: np.ndarray
-    cov: np.ndarray
 
 
 def condition_on_observed(mean, cov, basis: GaussianBasis, n_observed: int, z, Y, noise_var):

@@ -107,7 +107,8 @@ def held_out_statistics(model, demos, *, n_alpha: int, min_interval: float,
                         window_size: int = WINDOW):
     """Prefix statistics per n (list of arrays over demonstrations, n = 1..) and every window
     statistic, of ``demos`` fed through an OnlineEstimator of ``model`` (the online way)."""
-    from mixture_ip_ros.core.online import OnlineEstimator, observed_rows
+    from mixture_ip_ros.core.online import OnlineEstimator
+    from mixture_ip_ros.core.playback import observed_rows
     prefix, windows = {}, []
     est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval)
     for demo in demos:
@@ -138,7 +139,7 @@ def calibrate(demos, fit, *, n_alpha: int = 50, min_interval: float = 0.05, n_fo
     each demonstration once serves every fold). The folds run on ``n_jobs`` threads
     (core.parallel.map_threads; None: every core), so ``fit`` must not share mutable state
     between calls."""
-    from mixture_ip_ros.core.selection import cv_folds
+    from mixture_ip_ros.core.crossval import cv_folds
     demos = list(demos)
     if len(demos) < 2:
         raise ValueError('novelty calibration needs at least 2 demonstrations')

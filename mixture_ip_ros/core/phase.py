@@ -141,5 +141,5 @@ def phase_posterior_batch(model, t, Y, grid, observed_only: bool = True):
     for k in range(model.n_components):
         for m, a in enumerate(grid):
             lp[k, m] += log_evidence_batch(model.means_[k][:do], model.covariances_[k][:do, :do],
-                                           model.basis_, t, Y, a, model._observed_noise(k))
+                                           model.basis_, t, Y, a, model.observed_noise(k))
     return lp - logsumexp(lp)

@@ -7,31 +7,25 @@ streaming detector sample by sample: both agree exactly on the same samples.
 
 Detection: speed is the norm of a least-squares velocity over a sliding time window
 (running sums, O(1) per sample). Noise of sigma_p per coordinate gives a per-axis velocity
-noise of about sigma_p * sqrt(12 / (n w^2)) for n samples in a window of w seconds: 1 mm at
-500 Hz over 0.15 s is 3 mm/s, at 100 Hz 6 mm/s, under the default rest threshold of 3 cm/s
-(with more noise, raise ``speed_window`` or the thresholds).
+noise of about sigma_p * sqrt(12 / (n w^2)) for n samples in a window of w seconds, which
+``speed_window`` and the thresholds must stay above.
 
 Thresholds relative to the recording's own rest: a real hand never holds perfectly still (a
-person's wrist drifts at 4-7 cm/s before a reach and hovers at 4-8 cm/s after a handover, with
-motion-capture jitter of 0.1-0.2 mm per sample), so fixed speeds fire the onset at once and
-never see the end. The speed while at rest is tracked (its median and scaled median absolute
-deviation over the last ``rest_window`` seconds of rest, lagging ``speed_window`` behind so that
-a starting movement does not count as rest), and the thresholds are the fixed floors ``onset_speed`` /
+person's wrist drifts before a reach and hovers after a handover, faster than a fixed floor
+for motion-capture jitter), so fixed speeds would fire the onset at once and never see the
+end. The speed while at rest is tracked (its median and scaled median absolute deviation over
+the last ``rest_window`` seconds of rest, lagging ``speed_window`` behind so that a starting
+movement does not count as rest), and the thresholds are the fixed floors ``onset_speed`` /
 ``end_speed`` or that rest level plus ``onset_noise_factor`` / ``end_noise_factor`` spreads,
 whichever is higher. No onset is confirmed before ``rest_min`` seconds of rest have been
 measured (0: the fixed floors alone until then, so a recording that starts mid-movement has its
-onset at the first sample). On generated motion with millimetre noise the floors decide, as
-before.
+onset at the first sample).
 
-Dating: by the time speed has stayed above threshold the hand has moved for 0.1-1 s (slow
-reaches take longest). A smooth movement leaves rest with zero velocity and acceleration,
-so its displacement grows as (t - t_onset)^3. Once an onset is confirmed, the positions of
-the last ``max_backdate`` seconds up to the first threshold crossing are fitted with
-p(t) = b + a (t - t_onset)^3_+ (per-axis b, a; shared t_onset by grid search, O(samples x
-grid) once per movement); the end likewise, in reversed time, over the slowing down and
-the rest that confirmed it. On minimum-jerk reaches with 1 mm noise this dates onsets and
-ends within a few tens of ms (the profile is only cubic near its ends, so long slow
-reaches get dated up to ~0.1 s off). The dating is the same offline and online.
+Dating: by the time speed has stayed above threshold the hand has moved for a while (slow
+reaches longest). Once an onset is confirmed, it is dated back to when the hand left rest by a
+cubic fit to the positions of the last ``max_backdate`` seconds up to the first threshold
+crossing (core.cubic_onset); the end likewise, in reversed time, over the slowing down and
+the rest that confirmed it. The dating is the same offline and online.
 """
 
 from collections import deque
@@ -40,7 +34,7 @@ from typing import List, NamedTuple, Optional, Tuple
 
 import numpy as np
 
-EVENT_KINDS = ('onset', 'end', 'gap')
+from .cubic_onset import fit_cubic_onset
 
 # Time comparisons get 1 us of slack: durations are often whole numbers of sample periods
 # and round-off (e.g. of epoch stamps) must not decide them at random.
@@ -58,67 +52,6 @@ class Event(NamedTuple):
 
     kind: str  # 'onset' | 'end' | 'gap'
     time: float
-
-
-def fit_cubic_onset(t, positions, lo: float, hi: float, step: float = 0.01,
-                    drift: bool = False) -> float:
-    """Least-squares onset time of p(t) = b + a (t - t_onset)^3_+ with t_onset in [lo, hi]
-    (``drift``: p(t) = b + c t + a (t - t_onset)^3_+, a hand drifting at a constant velocity c
-    before it leaves rest).
-
-    ``t``: (N,) times, ``positions``: (N, D); b (c) and a are fitted per column for each
-    candidate t_onset (closed form). The grid of ``step`` seconds is searched on at most
-    ~250 of the samples, then refined to step / 10 on all of them (a few ms in all).
-    """
-    t = np.asarray(t, dtype=float)
-    x = np.asarray(positions, dtype=float)
-    if x.ndim == 1:
-        x = x[:, None]
-    if t.ndim != 1 or t.size < 3 or x.shape[0] != t.size:
-        raise ValueError(f'fit_cubic_onset: need at least 3 times and one position row per time, '
-                         f'got t {t.shape}, positions {x.shape}')
-    span = hi - lo
-    if not span >= 0:
-        raise ValueError(f'fit_cubic_onset: empty interval [{lo}, {hi}]')
-    if span == 0:
-        return lo
-    tr = t - lo
-    xc = x - x.mean(axis=0)
-
-    def best_with_drift(taus, stride):
-        ts, xs = tr[::stride], xc[::stride]
-        tc = ts - ts.mean()
-        tt = max(float(tc @ tc), 1e-300)
-        xs = xs - np.outer(tc, tc @ xs / tt)                # project out [1, t] (x is centred)
-        f = np.clip(ts[None, :] - taus[:, None], 0.0, None) ** 3
-        f = f - f.mean(axis=1, keepdims=True)
-        f = f - np.outer(f @ tc / tt, tc)
-        sff = np.einsum('gn,gn->g', f, f)
-        sfx = f @ xs
-        ok = sff > 1e-30 * max(1.0, float(sff.max()))
-        gain = np.where(ok, np.einsum('gd,gd->g', sfx, sfx) / np.where(ok, sff, 1.0), 0.0)
-        return float(taus[int(np.argmax(gain))])
-
-    def best(taus, stride):
-        if drift:
-            return best_with_drift(taus, stride)
-        ts, xs = tr[::stride], xc[::stride]
-        after = ts > taus[0]  # earlier samples have f = 0 for every candidate
-        f = np.clip(ts[after][None, :] - taus[:, None], 0.0, None) ** 3
-        sf = f.sum(axis=1)
-        sff = np.einsum('gn,gn->g', f, f) - sf * sf / ts.size
-        sfx = f @ xs[after] - sf[:, None] * xs.mean(axis=0)
-        # Variance explained by the cubic; zero where the candidate is after every sample.
-        ok = sff > 1e-30
-        gain = np.where(ok, np.einsum('gd,gd->g', sfx, sfx) / np.where(ok, sff, 1.0), 0.0)
-        return float(taus[int(np.argmax(gain))])
-
-    n = max(2, int(math.ceil(span / step)) + 1)
-    coarse = np.linspace(0.0, span, n)
-    tau = best(coarse, max(1, t.size // 250))
-    h = coarse[1] - coarse[0]
-    tau = best(np.linspace(max(0.0, tau - 2 * h), min(span, tau + 2 * h), 41), 1)
-    return lo + tau
 
 
 class MotionSegmenter:
@@ -208,11 +141,6 @@ class MotionSegmenter:
         return self._last_t
 
     @property
-    def speed(self) -> float:
-        """Latest windowed speed estimate (NaN while the window is too short)."""
-        return self._speed
-
-    @property
     def onset_threshold(self) -> float:
         """The onset speed in force: onset_speed or the rest level + onset_noise_factor spreads."""
         return self._on_thr
@@ -230,7 +158,6 @@ class MotionSegmenter:
         self._moving = False
         self._last_end = -math.inf
         self._onset_time = -math.inf
-        self._speed = math.nan
         self._hist.clear()
         self._pending.clear()
         self._rest.clear()
@@ -274,7 +201,6 @@ class MotionSegmenter:
         while hist[0][0] < horizon:
             hist.popleft()
         speed, center = self._push(t, x, y, z)
-        self._speed = speed
         if not self._moving:
             self._track_rest(t, speed)
         if speed == speed:  # not NaN: the window is long enough
@@ -325,7 +251,7 @@ class MotionSegmenter:
             self._rest.popleft()
         if len(self._rest) >= 5:
             # np.median's values (the middle one, or the mean of the two middle ones) from a
-            # sorted list: a few microseconds per sample instead of numpy's overhead.
+            # sorted list, without numpy's per-call overhead at every sample.
             v = sorted([r[1] for r in self._rest])
             level = _median_sorted(v)
             spread = 1.4826 * _median_sorted(sorted([abs(x - level) for x in v]))

@@ -1,60 +1,37 @@
 """How many components, and how much covariance floor: held-out criteria of the Mixture of
-Interaction ProMPs, computed from cross-validated fits through the estimator's public methods.
+Interaction ProMPs, computed from cross-validated fits (core.crossval) through the estimator's
+public methods, and the choices training makes with them.
 
 - the thesis's leave-one-out RMS of the controlled agent (Figs. 8 and 10),
   :func:`loo_rms_by_components`, given the final observed position or the whole path;
 - the held-out log-likelihood of whole demonstrations, the completion of a held-out
   demonstration from its beginning and the controlled agent's held-out online RMS, each K at the
-  covariance floor the criterion prefers (:func:`calibrated_heldout_curves`), what training
-  calibrates the floor with;
-- the plateau rule that reads a curve (:func:`selection_curve`).
-What each demonstration contributes on its own is computed once (MixtureIProMP.prepare) and
-every fold takes its part (Prepared.take).
+  covariance floor the criterion prefers (:func:`calibrated_heldout_curves`);
+- the plateau rule that reads a curve (:func:`selection_curve`);
+- training's choices: K by the pattern space (:func:`choose_by_patterns`) or by the thesis's
+  leave-one-out (:func:`choose_by_loo`), and the floor of a given K (:func:`calibrated_floor`).
+What each demonstration contributes on its own is computed once (core.crossval.prepare_for_cv)
+and every fold takes its part (Prepared.take).
 """
 
-import inspect
 from typing import NamedTuple
 
 import numpy as np
 
 from .basis import GaussianBasis
-from .demonstration import Demonstration
-from .interaction import trajectory_distribution
-from .mixture import MixtureIProMP, Prepared
-from .numerics import first_best, logsumexp_rows, tie_tolerance
-from .online import OnlineEstimator, prefix_predictions
+from .crossval import fold_scores, k_folds, leave_one_out, n_basis_of, prepare_for_cv
+from .mixture import MixtureIProMP
+from .numerics import first_best, tie_tolerance
 from .parallel import ProgressCount, map_threads
-from .phase import alpha_log_density
-from .promp import ObservationStats, log_evidence, observation_stats, stack_stats
+from .patterns import PatternSpace, heldout_curve, partition_stability
+from .scores import (COMPLETION_FRACTIONS, beginning_stats, checked_fractions,
+                     completion_statistics, controlled_rms, final_rms, final_views, online_rms)
 
 
-# Covariance floors training calibrates over, as fractions of the within-
-# component variance per weight: half decades wide enough for every scenario evaluated (their
-# optima range from 3e-4, smooth generated reaches, to 1, letters and sampled covariances).
+# Covariance floors training calibrates over, as fractions of the within-component variance
+# per weight: half decades, wide enough for the optima of every scenario evaluated (smooth
+# generated reaches at the small end, letters and sampled covariances at the large).
 PRIOR_SCALES = tuple(float(f'{10.0 ** e:.3g}') for e in np.arange(0.5, -4.01, -0.5))
-
-# Where the completion criterion cuts a held-out demonstration into the beginning it observes
-# and the rest it predicts: the fractions recognition is reported at (app.evaluation), spread
-# over the movement so that no single cut decides.
-COMPLETION_FRACTIONS = (0.3, 0.5, 0.7)
-
-
-def beginning_stats(basis, demos, fractions):
-    """Per fraction f, the stacked statistics of every demonstration's beginning: its samples
-    (every DOF of both agents) at phases z <= f."""
-    out = []
-    for f in fractions:
-        out.append(stack_stats([observation_stats(basis, d.phase[d.phase <= f],
-                                                  np.hstack([d.observed, d.controlled])[
-                                                      d.phase <= f]) for d in demos]))
-    return out
-
-
-def checked_fractions(fractions):
-    f = np.atleast_1d(np.asarray(fractions, dtype=float))
-    if f.ndim != 1 or f.size == 0 or not np.all((f > 0) & (f < 1)):
-        raise ValueError(f'fractions must be numbers in (0, 1), got {fractions!r}')
-    return tuple(float(x) for x in f)
 
 
 def loo_rms_by_components(demonstrations, candidates, observe: str = 'final', progress=None,
@@ -76,181 +53,33 @@ def loo_rms_by_components(demonstrations, candidates, observe: str = 'final', pr
         raise ValueError('leave-one-out RMS of the controlled agent needs a controlled agent; '
                          'these demonstrations have none (use the held-out log-likelihood)')
     data = prepare_for_cv(demos, params)
-    final = (_final_views(GaussianBasis(params.get('n_basis', _DEFAULT_N_BASIS)), demos)
+    final = (final_views(GaussianBasis(n_basis_of(params)), demos)
              if observe == 'final' else None)
+    counter = ProgressCount(progress, len(candidates) * len(demos))
+
+    def fit(fold, K):
+        return MixtureIProMP(n_components=K, **params).fit(data.take(fold.train))
+
+    def score(model, fold, K):
+        rms = (final_rms(model, final, fold.test)[0] if final is not None
+               else controlled_rms(model, demos[fold.test[0]], observe))
+        counter.step(K)
+        return rms
+    folds = leave_one_out(len(demos))
     out = np.empty((len(candidates), len(demos)))
-    everyone = np.arange(len(demos))
     for a, K in enumerate(candidates):
-        for i, test in enumerate(demos):
-            model = MixtureIProMP(n_components=K, **params).fit(data.take(everyone != i))
-            out[a, i] = (_final_rms(model, final, [i])[0] if final is not None
-                         else controlled_rms(model, test, observe))
-            if progress:
-                progress(a * len(demos) + i + 1, out.size, K)
+        out[a] = fold_scores(folds, fit, score, (K,), n_jobs=1)
     return out
 
 
-def prepare_for_cv(demos, params) -> Prepared:
-    """Every demonstration prepared once (checked as ``fit`` checks them) for fits with
-    MixtureIProMP configuration ``params``."""
-    return MixtureIProMP(**{**params, 'n_components': 1}).prepare(demos)
+class _FoldPart(NamedTuple):
+    """What every fit of one fold shares: the demonstrations it learns from (``train``, a
+    Prepared), the held-out indices ``test``, their statistics and their beginnings'."""
 
-
-def controlled_rms(model, demo: Demonstration, observe: str = 'final'):
-    """RMS error of the predicted controlled trajectory of ``demo`` over its own samples."""
-    z = demo.phase
-    rows = np.flatnonzero(~np.isnan(demo.observed).any(axis=1))
-    if observe == 'final':
-        rows = rows[-1:]
-    elif observe != 'full':
-        raise ValueError(f"observe must be 'final' or 'full', got {observe!r}")
-    k, mean, _ = model.condition(z[rows], demo.observed[rows])
-    dofs = range(model.n_observed_, model.n_observed_ + model.n_controlled_)
-    pred = trajectory_distribution(mean, None, model.basis_, z, dofs=dofs)['position']
-    ok = ~np.isnan(demo.controlled).any(axis=1)
-    return float(np.sqrt(np.mean((pred[ok] - demo.controlled[ok]) ** 2)))
-
-
-class _FinalView(NamedTuple):
-    """What :func:`controlled_rms` (observe='final') needs of each demonstration, whatever model
-    it is scored under: the basis at its final observed sample ``phi`` (n, N) and that sample
-    ``y`` (n, P); per demonstration the basis at its samples with the controlled agent observed
-    ``psi`` and those samples ``yc``. Cross-validation computes it once for every fold."""
-
-    phi: np.ndarray
-    y: np.ndarray
-    psi: list
-    yc: list
-
-
-def _final_views(basis, demos) -> _FinalView:
-    rows = [np.flatnonzero(~np.isnan(d.observed).any(axis=1))[-1] for d in demos]
-    ok = [~np.isnan(d.controlled).any(axis=1) for d in demos]
-    return _FinalView(basis(np.array([d.phase[r] for d, r in zip(demos, rows)])),
-                      np.array([d.observed[r] for d, r in zip(demos, rows)]),
-                      [basis(d.phase[m]) for d, m in zip(demos, ok)],
-                      [d.controlled[m] for d, m in zip(demos, ok)])
-
-
-def _final_rms(model, view: _FinalView, idx) -> np.ndarray:
-    """:func:`controlled_rms` (observe='final') of the demonstrations ``idx`` of ``view`` at
-    once: one observation, so the Kalman form of eq. 4 (a P x P innovation per component)
-    gives the evidence of eq. 11 and the conditional mean of eq. 13 directly."""
-    idx = np.asarray(idx)
-    P, N = model.n_observed_, model.n_basis
-    do, K = P * N, model.n_components
-    phi, y = view.phi[idx], view.y[idx]                                    # (m, N), (m, P)
-    mu, cov = model.means_, model.covariances_
-    hm = np.einsum('kpn,in->ikp', mu[:, :do].reshape(K, P, N), phi)        # H mu, (m, K, P)
-    SH = np.einsum('kdpn,in->ikdp', cov[:, :, :do].reshape(K, -1, P, N), phi)  # Sigma H^T
-    S = np.einsum('ikpnq,in->ikpq', SH[:, :, :do].reshape(len(idx), K, P, N, P), phi)
-    nv = model.observed_noise_var_
-    S = S + (np.eye(P) * nv[..., None, :])                       # (P,) tied or (K, P) each
-    r = y[:, None, :] - hm
-    chol = np.linalg.cholesky(S)
-    u = np.linalg.solve(chol, r[..., None])[..., 0]
-    logdet = 2 * np.log(np.diagonal(chol, axis1=-2, axis2=-1)).sum(axis=-1)
-    lp = np.log(model.weights_) - 0.5 * ((u ** 2).sum(axis=-1) + logdet)
-    k = np.argmax(lp, axis=1)
-    m = np.arange(len(idx))
-    gain = np.linalg.solve(S[m, k], r[m, k][..., None])[..., 0]            # S^-1 (y - H mu)
-    mean = mu[k] + np.einsum('idp,ip->id', SH[m, k], gain)
-    out = np.empty(len(idx))
-    for j, i in enumerate(idx):
-        pred = view.psi[i] @ mean[j, do:].reshape(-1, N).T
-        out[j] = np.sqrt(np.mean((pred - view.yc[i]) ** 2)) if len(pred) else np.nan
-    return out
-
-
-def online_rms(model, demos, fractions=None, n_alpha: int = 50,
-               min_interval: float = 0.05) -> np.ndarray:
-    """How well ``model`` predicts each of ``demos``' controlled agent online, as the estimator
-    node does: after the first f T of the observed agent (phase unknown) for each ``fraction``
-    f (default COMPLETION_FRACTIONS), the MAP component's expected path of the controlled agent
-    over the rest of the movement (core.online.prefix_predictions); the RMS error over the
-    rest's samples and DOFs, averaged over the fractions. (len(demos),), NaN for a
-    demonstration with nothing left to predict at any fraction."""
-    fractions = checked_fractions(COMPLETION_FRACTIONS if fractions is None else fractions)
-    est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval)
-    out = np.full(len(demos), np.nan)
-    for i, demo in enumerate(demos):
-        errors = [np.sqrt(np.mean((p.controlled - demo.controlled[p.rest]) ** 2))
-                  for p in prefix_predictions(est, demo, fractions) if p.controlled is not None]
-        if errors:
-            out[i] = np.mean(errors)
-    return out
-
-
-def score_completion(model, demonstrations, fractions=None):
-    """How well ``model`` (a fitted MixtureIProMP) predicts the rest of each demonstration from
-    its beginning, the phase known (z = t / T, so alpha = 1/T too), for every ``fraction`` f
-    (default COMPLETION_FRACTIONS): the beginning B is the samples at z <= f, the rest R those
-    at z > f, every DOF of both agents. Returns (log_density, rms), each (n, len(fractions)):
-
-    - log p(R | B, alpha) = log p(R, B, alpha) - log p(B, alpha) under the mixture (eq. 6
-      with eq. 21 and p(alpha | k)): the predictive density of the rest, each component
-      weighted by its posterior given the beginning (eq. 11);
-    - the RMS error of the rest predicted as the thesis predicts (eqs. 12-13): the most
-      probable component given B and alpha, conditioned on B, its mean at the rest's
-      phases; over every DOF of the rest in the DOF's own unit (comparable across K, not
-      across data sets).
-    """
-    model._check_fitted()
-    fractions = checked_fractions(COMPLETION_FRACTIONS if fractions is None else fractions)
-    demos = list(demonstrations)
-    D = model.n_observed_ + model.n_controlled_
-    for demo in demos:
-        if demo.n_observed_dofs + demo.n_controlled_dofs != D:
-            raise ValueError(f'demonstration {demo.name!r} has {demo.n_observed_dofs} + '
-                             f'{demo.n_controlled_dofs} DOFs; the model has '
-                             f'{model.n_observed_} + {model.n_controlled_}')
-    full = stack_stats([observation_stats(model.basis_, d.phase,
-                                          np.hstack([d.observed, d.controlled]))
-                        for d in demos])
-    return completion_statistics(model, full, beginning_stats(model.basis_, demos, fractions),
-                                  np.array([1.0 / d.duration for d in demos]))
-
-def completion_statistics(model, full: ObservationStats, beginnings, alphas):
-    """The :func:`score_completion` of stacked statistics of the whole demonstrations, of
-    their beginnings (one stack per fraction) and their alpha = 1/T."""
-    K, D = model.n_components, model.n_observed_ + model.n_controlled_
-    N = model.n_basis
-    n = len(alphas)
-    noise = np.broadcast_to(model.noise_var_, (K, D))
-    prior = np.log(model.weights_) + alpha_log_density(alphas, model.alpha_mean_,
-                                                      model.alpha_std_ ** 2)
-    whole = prior + np.column_stack([log_evidence(full, model.means_[k], model.covariances_[k],
-                                                  noise[k]) for k in range(K)])
-    log_whole = logsumexp_rows(whole)
-    density = np.empty((n, len(beginnings)))
-    rms = np.empty((n, len(beginnings)))
-    for c, begin in enumerate(beginnings):
-        lp = prior.copy()
-        post = np.empty((K, n, D * N))
-        for k in range(K):
-            ll, post[k] = log_evidence(begin, model.means_[k], model.covariances_[k], noise[k],
-                                       posterior_means=True)
-            lp[:, k] += ll                                                  # eq. 11
-        density[:, c] = log_whole - logsumexp_rows(lp)
-        w = post[np.argmax(lp, axis=1), np.arange(n)].reshape(n, D, N)     # eqs. 12-13
-        # The rest's statistics are the whole's minus the beginning's (sums over samples).
-        G, b = full.G - begin.G, full.b - begin.b
-        sq = (full.yy - begin.yy - 2 * np.einsum('ijn,ijn->ij', w, b)
-              + np.einsum('ijn,ijnk,ijk->ij', w, G, w))
-        m = (full.m - begin.m).sum(axis=1)
-        rms[:, c] = np.sqrt(np.maximum(sq.sum(axis=1), 0.0) / np.maximum(m, 1.0))
-    return density, rms
-
-
-def cv_folds(n: int, n_folds: int, random_state=0):
-    """Fold index (n,) of each demonstration: a seeded permutation cut into ``n_folds`` parts."""
-    n_folds = int(min(n_folds, n))
-    if n_folds < 2:
-        raise ValueError(f'cross-validation needs at least 2 demonstrations, got {n}')
-    order = np.random.default_rng(random_state).permutation(n)
-    fold = np.empty(n, dtype=int)
-    fold[order] = np.arange(n) % n_folds
-    return fold
+    train: object
+    test: np.ndarray
+    test_stats: object
+    test_beginnings: object
 
 
 def _heldout_scores(demonstrations, candidates, scales, n_folds, progress, fold_seed, params,
@@ -258,47 +87,46 @@ def _heldout_scores(demonstrations, candidates, scales, n_folds, progress, fold_
     """Held-out scores, each (len(scales), len(candidates), n): every fold's model is the one
     ``MixtureIProMP(K, prior_scale=scale, **params).fit`` learns from the other folds, scored
     on the fold. 'loglik': :meth:`MixtureIProMP.score_demonstrations`; with ``fractions`` also
-    'completion' and 'completion_rms', :func:`score_completion`'s two scores
-    averaged over the fractions. What each demonstration contributes on its own is computed
-    once, and each fold's k-means start of each K once for every scale (it does not depend on
-    the floor). With ``controlled`` and a controlled agent, also 'controlled_rms':
-    :func:`online_rms` of the held-out demonstration (NaN for one with nothing to predict).
+    'completion' and 'completion_rms', core.scores.score_completion's two scores averaged over
+    the fractions. What each demonstration contributes on its own is computed once, and each
+    fold's k-means start of each K once for every scale (it does not depend on the floor).
+    With ``controlled`` and a controlled agent, also 'controlled_rms': core.scores.online_rms
+    of the held-out demonstration (NaN for one with nothing to predict).
     ``progress(done, total, K)`` after each fit. The fits run side by side on ``n_jobs``
-    threads (core.parallel.map_threads; None: every core), each filling its own entries.
-    ``data``: :func:`prepare_for_cv` of the demonstrations, if the caller has it."""
+    threads (core.crossval.fold_scores; None: every core), each filling its own entries.
+    ``data``: core.crossval.prepare_for_cv of the demonstrations, if the caller has it."""
     demos = list(demonstrations)
-    fold = cv_folds(len(demos), n_folds, fold_seed)
+    folds = k_folds(len(demos), n_folds, fold_seed)
     data = prepare_for_cv(demos, params) if data is None else data
     shape = (len(scales), len(candidates), len(demos))
     out = {'loglik': np.empty(shape)}
-    basis = GaussianBasis(params.get('n_basis', _DEFAULT_N_BASIS))
+    basis = GaussianBasis(n_basis_of(params))
     if controlled and demos[0].n_controlled_dofs:
         out['controlled_rms'] = np.empty(shape)
     if fractions:
         out['completion'], out['completion_rms'] = np.empty(shape), np.empty(shape)
         beginnings = beginning_stats(basis, demos, checked_fractions(fractions))
-    counter = ProgressCount(progress, len(scales) * len(candidates) * (fold.max() + 1))
-    # Each fold: its training set, the held-out rows and their statistics (and beginnings).
-    folds = []
-    for f in range(fold.max() + 1):
-        test = np.flatnonzero(fold == f)
-        folds.append((data.take(fold != f), test, data.take(test).stats,
-                      [st.take(test) for st in beginnings] if fractions else None))
-    keys = [(f, a) for f in range(len(folds)) for a in range(len(candidates))]
+    counter = ProgressCount(progress, len(scales) * len(candidates) * len(folds))
+    parts = [_FoldPart(data.take(fold.train), fold.test, data.take(fold.test).stats,
+                       [st.take(fold.test) for st in beginnings] if fractions else None)
+             for fold in folds]
+    keys = [(f, a) for f in range(len(parts)) for a in range(len(candidates))]
 
     def start(key):
-        train, K = folds[key[0]][0], candidates[key[1]]
+        train, K = parts[key[0]].train, candidates[key[1]]
         return (MixtureIProMP(n_components=K, **params).initial_clusters(train)
                 if len(train.W) >= K else None)
     # The k-means start of a fold's K is the same for every floor: made once, then every
     # (fold, K, floor) fit is a task of its own (more tasks than threads keeps both busy).
     inits = dict(zip(keys, map_threads(start, keys, n_jobs)))
 
-    def one_fit(task):
-        f, a, b = task
-        (train, test, test_stats, test_beginnings), K = folds[f], candidates[a]
-        model = MixtureIProMP(n_components=K, **{**params, 'prior_scale': scales[b]})
-        model.fit(train, init=inits[f, a])
+    def fit(f, setting):
+        a, b = setting
+        model = MixtureIProMP(n_components=candidates[a], **{**params, 'prior_scale': scales[b]})
+        return model.fit(parts[f].train, init=inits[f, a])
+
+    def score(model, f, setting):
+        (a, b), (_, test, test_stats, test_beginnings) = setting, parts[f]
         out['loglik'][b, a, test] = model.score_statistics(test_stats, data.alphas[test])
         if 'controlled_rms' in out:
             out['controlled_rms'][b, a, test] = online_rms(model, [demos[i] for i in test])
@@ -307,12 +135,10 @@ def _heldout_scores(demonstrations, candidates, scales, n_folds, progress, fold_
                                                  data.alphas[test])
             out['completion'][b, a, test] = density.mean(axis=1)
             out['completion_rms'][b, a, test] = rms.mean(axis=1)
-        counter.step(K)
-    map_threads(one_fit, [(f, a, b) for f, a in keys for b in range(len(scales))], n_jobs)
+        counter.step(candidates[a])
+    settings = [(a, b) for a in range(len(candidates)) for b in range(len(scales))]
+    fold_scores(range(len(parts)), fit, score, settings, n_jobs)
     return out
-
-
-_DEFAULT_N_BASIS = inspect.signature(MixtureIProMP).parameters['n_basis'].default
 
 
 def calibrated_heldout_curves(demonstrations, candidates, fractions=COMPLETION_FRACTIONS,
@@ -325,8 +151,8 @@ def calibrated_heldout_curves(demonstrations, candidates, fractions=COMPLETION_F
     The floor is the variance a component gets in the directions its few members do not span
     (fewer demonstrations than weights). Too small, and a held-out demonstration of the same
     pattern falls outside the component; too large, and the components blur into each other.
-    The right amount depends on the data (smooth generated reaches want 1e-3 of the within-
-    pattern variance, sampled covariances and letters 0.3 to 3), so no fixed value is right
+    The right amount depends on the data (smooth generated reaches want a floor orders of
+    magnitude below what sampled covariances and letters want), so no fixed value is right
     for every data set. The same folds for every floor and K; the maximum over a few floors
     makes every K's curve equally optimistic, so the paired comparison between K stays fair.
     The criteria:
@@ -334,30 +160,28 @@ def calibrated_heldout_curves(demonstrations, candidates, fractions=COMPLETION_F
     - 'loglik': log p(D_i, alpha_i) of the held-out demonstration (higher is better);
     - with ``controlled`` (default) and a controlled agent, 'controlled_rms': the controlled
       agent predicted online from the observed agent's beginning, the phase unknown, as the
-      estimator node predicts it (:func:`online_rms`) on the held-out folds, lower is better.
+      estimator node predicts it (:func:`core.scores.online_rms`) on the held-out folds,
+      lower is better.
       Its floor is the one with the best held-out likelihood among the floors whose RMS is
       within one paired standard error of the lowest (the one-standard-error rule of RMS
       curves, as :func:`selection_curve` reads the thesis's): what the robot is for decides,
       and among the floors it cannot tell apart the one that describes the demonstrations
-      best. Two standard errors let the likelihood pull the floor up to where the prediction
-      is visibly worse (the arm in a NuiSI person's place, joint angles: 0.316, RMS 0.29 rad
-      against 0.27 at 0.0316). The likelihood alone scores whole demonstrations with
+      best. Two standard errors would let the likelihood pull the floor up to where the
+      prediction is visibly worse. The likelihood alone scores whole demonstrations with
       their phase known and prefers floors that blur the patterns for a beginning whose phase
-      is not: on NuiSI v2 (bench/floor_online.py) it peaks at floors of 0.1 to 0.3, where
-      online recognition from 30 % of the movement is 86 % and lower, against 98-100 % at
-      0.03 to 0.001, the partner's error falling with it. The RMS alone barely moves below
-      some floor, so its minimum there is noise at the grid's edge, which the likelihood
-      settles.
+      is not, where online recognition and the partner's prediction are worse
+      (experiments/floor_online.py). The RMS alone barely moves below some floor, so its
+      minimum there is noise at the grid's edge, which the likelihood settles.
     - with ``fractions``, the single-agent analogue of the thesis's leave-one-out of the
       controlled agent, what a model of one agent's movements is used for (recognise a
       movement and predict its rest from its beginning): 'completion', the predictive log
       density of the rest given the beginning, log p(D_i[z > f] | D_i[z <= f], alpha_i),
       and 'completion_rms', the RMS error of the rest predicted from the beginning (lower is
-      better), each averaged over the fractions f (:func:`score_completion`).
+      better), each averaged over the fractions f (:func:`core.scores.score_completion`).
 
     The folds run on ``n_jobs`` threads (None: every core; the same result for any number).
-    ``prepared``: :func:`prepare_for_cv` of the demonstrations with these ``params``, where
-    the caller has it (training shares it between its stages).
+    ``prepared``: :func:`core.crossval.prepare_for_cv` of the demonstrations with these
+    ``params``, where the caller has it (training shares it between its stages).
     Returns {criterion: {'scores' (len(candidates), n): each K's per-demonstration score at
     its floor, 'prior_scale': the floor per candidate, 'prior_scales' and 'mean_by_scale'
     (len(prior_scales), len(candidates)): the mean of every curve tried}}.
@@ -468,3 +292,107 @@ def selection_curve(scores, higher_is_better: bool = False, paired: bool = False
                 'parsimony')
     return {'index': index, 'mean': mean.tolist(), 'se': se.tolist(), 'clear': bool(clear),
             'note': note}
+
+
+def _curve_summary(candidates, scores, curve) -> dict:
+    return {'candidates': list(candidates), 'mean': curve['mean'],
+            'std': np.asarray(scores).std(axis=1).tolist(), 'se': curve['se'],
+            'chosen': int(candidates[curve['index']]), 'clear_optimum': curve['clear'],
+            'note': curve['note']}
+
+
+def _offset_progress(progress, offset, total):
+    """``progress`` of one batch of fits, ``offset`` fits into ``total`` fits in all (None:
+    the batch's own total)."""
+    if progress is None:
+        return None
+    return lambda done, n, K: progress(offset + done, n if total is None else total, K)
+
+
+def choose_by_patterns(data, candidates, params) -> dict:
+    """K by the held-out likelihood in the pattern space (core.patterns), and among the K it
+    cannot tell apart, by how reproducible their partitions are (``data``: prepare_for_cv of
+    the demonstrations with MixtureIProMP configuration ``params``). Returns training's
+    summary of the choice: the curve, the chosen K, whether it is a clear optimum, each K's
+    stability and the pattern space's size."""
+    space = PatternSpace(n_basis_of(params), data.n_observed,
+                         translation=params.get('translation', ())).fit(data.W)
+    X = space.transform(data.W)
+    held = heldout_curve(X, candidates)
+    stability = {}
+    # Which K the held-out likelihood supports: those within two paired standard errors of
+    # the best (the plateau). Within it, the likelihood alone would split a pattern whose
+    # spread is not Gaussian (box assembly's plates, drawn from a wide box), a split the data
+    # do not hold, which cluster stability detects (a split of one pattern falls where each
+    # subsample's members put it; core.patterns.partition_stability). The agreement of a K's
+    # subsample pairs is read by its median, not its mean: an EM fit on a subsample that now
+    # and then lands in another local optimum costs a partition the data reproduce exactly in
+    # most pairs its mean, not its median (NuiSI v2's handshake and parachute fist-bump),
+    # while an arbitrary split is reproduced exactly in few (box assembly's plates). So: the K
+    # whose median agreement reaches the lower quartile of the most reproducible K's (as
+    # reproducible as a quarter of its own pairs); of those, the smallest within one paired
+    # standard error of their best held-out likelihood (in a space of one or two dimensions a
+    # split of one pattern can be reproducible too, and gains nothing held out).
+    def most_reproducible(plateau):
+        fits = [i for i in plateau if candidates[i] <= round(0.8 * len(X))]
+        if len(fits) < 2:
+            return plateau[0]
+        agreement = partition_stability(X, [candidates[i] for i in fits])
+        median = np.median(agreement, axis=1)
+        stability.update({int(candidates[i]): float(m) for i, m in zip(fits, median)})
+        quartile = np.percentile(agreement[first_best(median)], 25)
+        ok = [i for i, m in zip(fits, median) if m >= quartile - tie_tolerance(agreement)]
+        near = not_significantly_worse(held.robust[ok], n_se=1.0)
+        return ok[int(np.flatnonzero(near)[0])]
+    curve = selection_curve(held.robust, higher_is_better=True, paired=True,
+                            choose=most_reproducible)
+    summary = _curve_summary(candidates, held.robust, curve)
+    return {'criterion': 'patterns', **summary,
+            'unit': 'nats per demonstration, leave-one-out, in the pattern space',
+            'stability': stability,
+            'pattern_dims': int(len(space.components_)),
+            'smoothing': data.smoothing.tolist(),
+            'explained_variance': float(space.explained_variance_ratio_.sum())}
+
+
+def choose_by_loo(demos, candidates, n_folds, progress, prior_scales, params, n_jobs=None,
+                  prepared=None) -> dict:
+    """K by the thesis's leave-one-out RMS of the controlled agent, each K at the robot's
+    floor calibrated on held-out folds (a K too large for the folds, as leave-one-out trains on
+    one more demonstration, takes the floor of the largest K they calibrated). Returns
+    training's summary of the choice: the curve, the chosen K, whether it is a clear optimum,
+    each K's floor and the chosen K's (``prior_scale``)."""
+    scales = [params['prior_scale']] if 'prior_scale' in params else list(prior_scales)
+    n_fold = int(min(n_folds, len(demos)))
+    n_train = len(demos) - int(np.ceil(len(demos) / n_fold))
+    folded = [k for k in candidates if k <= n_train]
+    if not folded:
+        raise ValueError(f'not enough demonstrations for {n_folds}-fold cross-validation')
+    n_cal = len(scales) * len(folded) * n_fold
+    total = n_cal + len(candidates) * len(demos)
+    curves = calibrated_heldout_curves(demos, folded, (), scales, n_folds,
+                                       _offset_progress(progress, 0, total), n_jobs=n_jobs,
+                                       prepared=prepared, **params)
+    calibrated = dict(zip(folded, curves['controlled_rms']['prior_scale']))
+    floor = {K: calibrated[max(k for k in folded if k <= K)] for K in candidates}
+    rms = np.vstack([
+        loo_rms_by_components(demos, [K], 'final',
+                              _offset_progress(progress, n_cal + a * len(demos), total),
+                              **{**params, 'prior_scale': floor[K]})
+        for a, K in enumerate(candidates)])
+    summary = _curve_summary(candidates, rms, selection_curve(rms))
+    return {'criterion': 'loo', **summary, 'unit': 'rad (or the unit of the controlled DOFs)',
+            'prior_scales': [floor[K] for K in candidates],
+            'prior_scale': floor[summary['chosen']]}
+
+
+def calibrated_floor(demos, K, n_folds, progress, prior_scales, params, n_jobs=None,
+                     prepared=None) -> float:
+    """The covariance floor of a K-component model, calibrated on held-out folds: the one with
+    the best held-out likelihood or, where there is a controlled agent, the one that predicts
+    it best among those not significantly worse (:func:`calibrated_heldout_curves`)."""
+    curves = calibrated_heldout_curves(demos, [K], (), list(prior_scales), n_folds,
+                                       _offset_progress(progress, 0, None), n_jobs=n_jobs,
+                                       prepared=prepared, **params)
+    which = 'controlled_rms' if 'controlled_rms' in curves else 'loglik'
+    return float(curves[which]['prior_scale'][0])

@@ -1,9 +1,9 @@
 """The estimation layer's fast paths: the phases and the checks of every plan, compiled.
 
 The node plans in callbacks that follow a wait, where each distinct numpy call costs tens of
-microseconds (bench/replan.py, 'after_sleep'): each of these is one compiled call in place of
-a handful of numpy statements, and must give their values bit for bit (test_estimation
-compares each with the numpy it replaces on random inputs):
+microseconds: each of these is one compiled call in place of a handful of numpy statements,
+and must give their values bit for bit (test_estimation compares each with the numpy it
+replaces on random inputs):
 
 - linspace: np.linspace (plans.build_plan's phases);
 - plan_problem: plans.check_plan's checks as numpy statements (test_estimation's

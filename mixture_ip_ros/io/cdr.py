@@ -7,13 +7,13 @@ serialisation, test_bags against rosbags'.
 
 Encoding: JointTrajectory, Path and Float64MultiArray messages filled from numpy arrays.
 Built as rclpy message objects, a JointTrajectory is one Python object per point and field,
-each checked by its setter: most of the estimator's time before the robot gets its plan
-(bench/replan.py measures both ways). Publisher.publish also takes a serialized message, so the
-estimator fills a byte template instead, cached per number of points, where only stamps, times
-and numbers change. The numbers go into the template in one compiled call per message
-(io._fast.fill): in the node every callback follows a wait, and a thread woken from a wait
-runs each distinct numpy function several times slower than in a loop (bench/replan.py,
-'after_sleep'); a handful of numpy calls per field cost more than the message.
+each checked by its setter: most of the estimator's time before the robot gets its plan.
+Publisher.publish also takes a serialized message, so the estimator fills a byte template
+instead, cached per number of points, where only stamps, times and numbers change. The numbers
+go into the template in one compiled call per message (io._fast.fill): in the node every
+callback follows a wait, and a thread woken from a wait runs each distinct numpy function
+several times slower than in a loop; a handful of numpy calls per field cost more than the
+message.
 
 Decoding: PoseStamped and JointState streams whose messages share one layout (the same size,
 frame id and joint names, as a recorder writes them), read as arrays: every field is then at

@@ -10,9 +10,10 @@ The metadata names every DOF and its unit, in column order: ``observed_names``,
 iiwa only, before units were recorded) load with units 'm' and 'rad'; files before format 4
 (before the phase-speed weight) load with weight 1, the posterior they were used with. Format 4
 is written so that an older package, which would drop the weight, refuses the file instead.
-A model with a phase warp (MixtureIProMP.fit_warps) adds the arrays ``warp_mean`` and
-``warp_sd``; a file without them loads with the linear phase, and an older package reading one
-uses the linear phase.
+A model with phase warps (``model.warps_``, core.warped.PhaseWarps) adds their ``mean_`` and
+``sd_`` as the arrays ``warp_mean`` and ``warp_sd`` and their ``failed_`` as the metadata
+``warp_failed``; a file without them loads with the linear phase (``warps_`` None), and an
+older package reading one uses the linear phase.
 """
 
 import json
@@ -28,6 +29,7 @@ from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.novelty import NoveltyThresholds
 from mixture_ip_ros.core.patterns import translation_groups
 from mixture_ip_ros.core.warp import N_WARP, WIDTH
+from mixture_ip_ros.core.warped import PhaseWarps
 from mixture_ip_ros.io.files import write_atomic
 
 FORMAT = 'mixture_ip_ros/mixture-iprompt'
@@ -99,10 +101,11 @@ def save_model(path, model: MixtureIProMP, *, layout: Layout = None, observed_na
         'extra': extra or {},
     }
     arrays = {name: np.asarray(getattr(model, name + '_'), dtype=float) for name in _ARRAYS}
-    if getattr(model, 'warp_mean_', None) is not None:      # the phase that bends, learned
-        arrays.update(warp_mean=model.warp_mean_, warp_sd=model.warp_sd_)
+    warps = getattr(model, 'warps_', None)
+    if warps is not None:                                   # the phase that bends, learned
+        arrays.update(warp_mean=warps.mean_, warp_sd=warps.sd_)
         meta['warp'] = _WARP_FAMILY
-        meta['warp_failed'] = [_jsonable_param(n) for n in model.warp_failed_]
+        meta['warp_failed'] = [_jsonable_param(n) for n in warps.failed_]
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     return write_atomic(path, lambda f: np.savez(f, metadata=np.array(json.dumps(meta)),
@@ -214,11 +217,10 @@ def load_model(path, *, observed_names=None, controlled_names=None):
     except (KeyError, TypeError, ValueError) as e:
         fail(f'invalid fitted smoothing or offsets ({e})')
     model.classes_ = meta.get('classes')
-    model.warp_mean_ = model.warp_sd_ = None        # files without them: the linear phase
+    model.warps_ = None                             # files without them: the linear phase
     failed = meta.get('warp_failed', [])
     if not isinstance(failed, list) or not all(isinstance(n, (str, int)) for n in failed):
         fail(f'warp_failed must list demonstration names or indices, got {failed!r}')
-    model.warp_failed_ = failed
     if ('warp_mean' in data) != ('warp_sd' in data):
         fail('warp_mean and warp_sd go together')
     if 'warp_mean' in data:
@@ -230,7 +232,8 @@ def load_model(path, *, observed_names=None, controlled_names=None):
                 or not np.all(np.isfinite(mean)) or not np.all(np.isfinite(sd) & (sd > 0))):
             fail(f'the phase warp needs finite warp_mean and positive warp_sd of shape '
                  f'({K}, {N_WARP}), got {mean.shape} and {sd.shape}')
-        model.warp_mean_, model.warp_sd_ = mean, sd
+        model.warps_ = PhaseWarps()
+        model.warps_.mean_, model.warps_.sd_, model.warps_.failed_ = mean, sd, failed
     try:
         model.novelty_ = novelty_thresholds(meta)
     except (KeyError, TypeError, ValueError) as e:

@@ -158,7 +158,6 @@ class BagPlayer(Node):
         self.max_lateness = 0.0  # seconds a message went out after it was due
         self.paused_total = 0.0  # seconds of the pacing clock spent paused during playback
         self.holding = False     # the playback thread is waiting in a pause
-        self._lateness_sum = 0.0
         self.recent_lateness = deque(maxlen=10000)  # per message, seconds (negative = early)
         self.first_sent = self.last_sent = None     # monotonic times of first / last publish
         self._sim_time = bool(self.get_parameter('use_sim_time').value)
@@ -198,10 +197,6 @@ class BagPlayer(Node):
 
     def wait_until_finished(self, timeout=None) -> bool:
         return self._done.wait(timeout)
-
-    @property
-    def mean_lateness(self) -> float:
-        return self._lateness_sum / self.published if self.published else 0.0
 
     def matched_subscriptions(self) -> dict:
         """{bag topic: number of matched subscriptions}."""
@@ -291,7 +286,6 @@ class BagPlayer(Node):
                     self.last_sent = sent
                     late = sent - (due + shift[0])
                     self.recent_lateness.append(late)
-                    self._lateness_sum += late
                     self.max_lateness = max(self.max_lateness, late)
                 self.loops_completed += 1
                 if not self._loop:

@@ -48,7 +48,8 @@ from mixture_ip_ros.estimation.records import LatencyStats
 from mixture_ip_ros.io.cdr import Float64MultiArrayEncoder, JointTrajectoryEncoder, PathEncoder
 from mixture_ip_ros.io.model_file import load_model
 from mixture_ip_ros.nodes import qos
-from mixture_ip_ros.nodes.diagnostics import OK, WARN, PublishesDiagnostics, diagnostic_array
+from mixture_ip_ros.nodes.diagnostics import PublishesDiagnostics
+from mixture_ip_ros.nodes.estimator_diagnostics import EstimationDiagnostics
 from mixture_ip_ros.nodes.managed import ManagedNode, run_node
 from mixture_ip_ros.nodes.markers import prediction_markers
 from mixture_ip_ros.nodes.params import (autostart_param, event_topic_param,
@@ -58,7 +59,6 @@ from mixture_ip_ros.robot.description import (BASE_FRAME, DEFAULT_ROBOT, JOINT_N
 from mixture_ip_ros.robot.kinematics import RobotKinematics
 
 N_OBSERVED = 3   # a PointStamped carries x, y, z
-DIAGNOSTIC_NAME = 'estimator_node: estimation'
 
 
 @dataclass
@@ -214,7 +214,7 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
         self.posterior_pub = publisher(Float64MultiArray, p.posterior_topic, out)
         self.marker_pub = publisher(MarkerArray, p.marker_topic, out)
         self.diagnostics_pub = publisher(DiagnosticArray, '/diagnostics', out)
-        self._diag_seen = (0, 0)
+        self._diagnostics = EstimationDiagnostics()
         labels = meta.get('component_labels')
         self.get_logger().info(
             f'model {p.model_path}: {model.n_components} components'
@@ -457,51 +457,8 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
             [self._label(k).strip(' ()') or f'component {k}' for k, _, _ in paths]))
 
     def diagnostics_msg(self) -> DiagnosticArray:
-        pl = self.planner
-        counts = pl.counts
-        rec = pl.current
-        values = {
-            'state': pl.state,
-            'interactions': len(pl.interactions),
-            'component': rec and rec.component,
-            'label': rec and rec.label,
-            'confidence': rec and rec.confidence,
-            'alpha': rec and rec.alpha,
-            'phase': rec and rec.phase,
-            'commit_phase': rec and rec.commit_phase,
-            'switches': len(rec.switches) if rec else 0,
-            'observations_received': counts.received,
-            'observations_used': counts.used,
-            'observations_skipped': counts.skipped,
-            'observations_held': pl.n_held,
-            'observations_backlog': pl.n_backlog,
-            'interaction_observations_used': rec and rec.n_observations,
-            **{f'rejected_{k}': v for k, v in counts.rejected.items()},
-            'update_latency_last_us': round(self.latency.last_us, 1),
-            'update_latency_mean_us': round(self.latency.mean_us, 1),
-            'update_latency_max_us': round(self.latency.max_us, 1),
-            'plan_latency_last_us': round(self.plan_latency.last_us, 1),
-            'plan_latency_mean_us': round(self.plan_latency.mean_us, 1),
-            'plan_latency_max_us': round(self.plan_latency.max_us, 1),
-            'plans_sent': counts.plans_sent,
-            'holds_unexplained': counts.holds,
-            'unexplained': rec and rec.unexplained,
-            'plans_time_scaled': counts.plans_time_scaled,
-            **{f'plans_refused_{k}': v for k, v in counts.plan_refusals.items()},
-            'events_unknown': self.events['unknown'],
-        }
-        # WARN while problems are new (since the previous message); totals stay in the values.
-        new_rejected = counts.n_rejected - self._diag_seen[0]
-        new_failures = counts.plan_failures - self._diag_seen[1]
-        self._diag_seen = (counts.n_rejected, counts.plan_failures)
-        if new_failures:
-            level, message = WARN, f'{pl.state}; {new_failures} plans refused'
-        elif new_rejected:
-            level, message = WARN, f'{pl.state}; {new_rejected} observations rejected'
-        else:
-            level, message = OK, pl.state
-        return diagnostic_array(self.get_clock().now().to_msg(), DIAGNOSTIC_NAME, level, message,
-                                values)
+        return self._diagnostics.message(self.get_clock().now().to_msg(), self.planner,
+                                         self.latency, self.plan_latency, self.events)
 
     # -- logging ------------------------------------------------------------------------
     def _label(self, k) -> str:

@@ -132,9 +132,8 @@ class _Interrupts:
     exception raised wherever the process happens to be: one raised inside rclpy's
     create_subscription (the subscription registered, its event handlers not yet) leaves a node
     whose destroy_node raises. Nor is rclpy's own handler used: it shuts the context down from
-    another thread, at any point of a callback, and was seen to leave a node spinning on
-    (SIGINT ignored at start, as for a shell's background job) or to crash it while it
-    published."""
+    another thread, at any point of a callback, and can leave a node spinning on (SIGINT
+    ignored at start, as for a shell's background job) or crash it while it publishes."""
 
     def __init__(self):
         self.requested = False

@@ -59,10 +59,6 @@ def positive(value) -> Optional[str]:
     return None if value > 0 else 'must be > 0'
 
 
-def non_empty(value) -> Optional[str]:
-    return None if value else 'must not be empty'
-
-
 def finite_list(length: Optional[int] = None, positive_values: bool = False):
     def check(values) -> Optional[str]:
         if length is not None and len(values) != length:

@@ -59,10 +59,6 @@ class InteractionRecorder(Node):
             return {k: list(getattr(self, k)) for k in
                     ('joints', 'wrist', 'events', 'posterior', 'trajectories')}
 
-    def latest_time(self) -> float:
-        with self._lock:
-            return self.joints[-1][0] if self.joints else 0.0
-
     def _on_joints(self, msg):
         with self._lock:
             self.joints.append((_sec(msg.header.stamp), np.array(msg.position)))

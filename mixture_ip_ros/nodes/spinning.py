@@ -31,7 +31,7 @@ def spin_in_thread(node):
     """Spin ``node`` with its own SingleThreadedExecutor in a daemon thread; returns (executor,
     thread). One executor per node: a MultiThreadedExecutor shared by several nodes lets their
     callbacks contend for the GIL and the executor's own bookkeeping, which on a small machine
-    slows an in-process simulation far below real time (README, Benchmarks)."""
+    slows an in-process simulation far below real time."""
     executor = SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
     thread = threading.Thread(target=executor.spin, daemon=True)

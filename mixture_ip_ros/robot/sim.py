@@ -11,7 +11,7 @@ import numpy as np
 
 from mixture_ip_ros.robot.controller import ComputedTorqueController
 from mixture_ip_ros.robot.kinematics import RobotKinematics
-from mixture_ip_ros.robot.scene import FLANGE_SITE, HUMAN_WRIST, build_scene
+from mixture_ip_ros.robot.scene import FLANGE_SITE, build_scene
 from mixture_ip_ros.estimation.plans import JointLimits
 from mixture_ip_ros.robot.trajectory import (DEFAULT_MAX_POINTS, TrajectoryFollower,
                                              TrajectoryPoint, validate_trajectory)
@@ -78,14 +78,12 @@ class RobotSimulation:
         self.accepted_count = 0
         self.reference: tuple | None = None
         self._flange_site = self.model.site(FLANGE_SITE).id
-        self._wrist_mocap = int(self.model.body(HUMAN_WRIST).mocapid[0])
         qadr = [self.model.joint(name).qposadr[0] for name in self.joint_names]
         vadr = [self.model.joint(name).dofadr[0] for name in self.joint_names]
         if not (self.model.nq == self.model.nv == self.model.nu == n
                 and qadr == list(range(n)) and vadr == list(range(n))):
             raise ValueError(f'the scene must have exactly the {n} joints of '
                              f'{description.name} and their actuators')
-        self._to_world = description.base_to_world()
         self._to_base = description.world_to_base()
         self.reset_tracking()
         self.set_state(description.home_array() if q0 is None else q0)
@@ -151,13 +149,6 @@ class RobotSimulation:
         quat = np.empty(4)
         mujoco.mju_mat2Quat(quat, R.ravel())
         return pos, quat
-
-    def set_wrist(self, position) -> None:
-        """Show the human wrist at `position` (base frame)."""
-        p = np.asarray(position, dtype=float)
-        if p.shape != (3,) or not np.all(np.isfinite(p)):
-            raise ValueError('wrist position must be 3 finite numbers')
-        self.data.mocap_pos[self._wrist_mocap] = self._to_world.apply_array(p)
 
     # ------------------------------------------------------------------ commands
     def set_trajectory(self, joint_names: Sequence[str], points: Sequence[TrajectoryPoint],

@@ -282,11 +282,6 @@ class TrajectoryFollower:
     def active(self) -> bool:
         return self._plan is not None or self._pending is not None
 
-    @property
-    def finished_at(self) -> float | None:
-        """Absolute time of the last point of the anchored trajectory (None if none anchored)."""
-        return None if self._plan is None else self._plan.end_time
-
     def set(self, trajectory: JointTrajectory) -> None:
         self._pending = trajectory
 

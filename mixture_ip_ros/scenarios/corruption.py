@@ -1,8 +1,9 @@
 """Recordings as another lab would make them: the same interactions, the pair standing elsewhere
-in the room, a skeleton tracker's noise, a tracker's clock, fewer recordings, people who keep
-their pace less steadily. Each corruption is
-seeded and takes Demonstrations to new Demonstrations (the inputs are not changed), so that a
-robustness evaluation (bench/robustness.py) can run every method on the same corrupted data.
+in the room, a skeleton tracker's noise, a tracker's clock, people who keep their pace less
+steadily. Each corruption is seeded and takes Demonstrations to new Demonstrations (the inputs
+are not changed), so that a robustness evaluation (bench/robustness.py) can run every method on
+the same corrupted data. Fewer recordings is no corruption of the recordings but of a fold's
+training split: the evaluation's ``EvalConfig.train_fraction`` draws it per fold.
 
 The magnitudes are stated where they are set (:data:`DEFAULTS`) and are those of consumer
 skeleton trackers, not of any one data set: where a pair stands differs by tens of cm between
@@ -28,8 +29,7 @@ class Corruption:
     ``noise_time``: stationary std and correlation time of a first-order autoregressive
     tracker noise, independent per DOF and agent; ``jitter_std``: std of each stamp around the
     tracker's nominal period; ``drop``: share of frames lost, in bursts of 1 to ``burst``
-    frames; ``train_fraction``: share of each fold's training recordings kept (per label);
-    ``tempo_std`` and ``tempo_time``: std of the log pace within a movement and its correlation
+    frames; ``tempo_std`` and ``tempo_time``: std of the log pace within a movement and its correlation
     length as a share of the movement (:func:`retimed`)."""
 
     offset_std: tuple = (0.3, 0.15, 0.2)
@@ -38,7 +38,6 @@ class Corruption:
     jitter_std: float = 0.004
     drop: float = 0.1
     burst: int = 5
-    train_fraction: float = 0.5
     tempo_std: float = 0.3
     tempo_time: float = 0.2
 

@@ -13,13 +13,10 @@ and nothing of the archive is redistributed. The cache is io.cache's.
 The archive gives no sample rate; times assume the Wiimote's usual 100 Hz report rate (it only
 scales alpha and the online estimator's decimation interval, never the data). Each recording is
 a single-agent demonstration (1 observed DOF, nothing controlled), whole, as the archive cut it:
-t = 0 at its first sample. Cutting the rest off either end removed information the people
-differ by: in 5-fold cross-validation on the training split (bench/gesture_representation.py,
-supervised mixture, whole gesture observed, phase known / unknown) whole recordings 66 / 58 %,
-cut at the movement onset (bench/_common.py's segment_rest_deviation) 44 / 28 %, cut at
-its onset and end 42 / 38 %. The end cut was wrong on recordings that stop before the hand
-settles (the Wiimote rests at a new tilt, or never rests), and how long a person waits before
-moving is part of how that person makes the gesture.
+t = 0 at its first sample. Cutting the rest off either end removes information the people
+differ by (experiments/gesture_representation.py, docs/method.md): the end cut is wrong on
+recordings that stop before the hand settles (the Wiimote rests at a new tilt, or never rests),
+and how long a person waits before moving is part of how that person makes the gesture.
 """
 
 from __future__ import annotations

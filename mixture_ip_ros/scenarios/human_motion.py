@@ -17,14 +17,6 @@ def minimum_jerk(s):
     return s**3 * (10 - 15 * s + 6 * s * s)
 
 
-def minimum_jerk_velocity(s):
-    """dh/ds of :func:`minimum_jerk` (zero outside [0, 1])."""
-    s = np.asarray(s, dtype=float)
-    inside = (s >= 0) & (s <= 1)
-    sc = np.clip(s, 0.0, 1.0)
-    return np.where(inside, 30 * sc**2 * (1 - sc) ** 2, 0.0)
-
-
 def via_bump(s):
     """64 s^3 (1 - s)^3: 1 at s = 1/2, zero position/velocity/acceleration at both ends."""
     s = np.clip(np.asarray(s, dtype=float), 0.0, 1.0)

@@ -19,12 +19,12 @@ from pathlib import Path
 from typing import Optional
 
 from mixture_ip_ros.app.evaluation.common import (EvalConfig, jsonable, load_labelled_bags,
-                                                  prepare)
+                                                  subsampled)
 from mixture_ip_ros.io.files import write_text_atomic
 
 SCENARIOS = ('box_assembly', 'pole', 'phase', 'missing_data', 'gestures', 'interactions')
 
-__all__ = ['SCENARIOS', 'EvalConfig', 'evaluate', 'evaluate_csv', 'prepare']
+__all__ = ['SCENARIOS', 'EvalConfig', 'evaluate', 'evaluate_csv', 'subsampled']
 
 
 def evaluate(scenario: str, out_dir: Path, seed: int = 0, quick: bool = False, *,

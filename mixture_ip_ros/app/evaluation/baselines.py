@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 
 from mixture_ip_ros.app.evaluation.common import prefix_length
-from mixture_ip_ros.app.training import majority_names
+from mixture_ip_ros.app.naming import majority_names
 from mixture_ip_ros.core.basis import GaussianBasis
-from mixture_ip_ros.core.online import decimated_rows
-from mixture_ip_ros.core.selection import cv_folds
+from mixture_ip_ros.core.crossval import cv_folds
 from mixture_ip_ros.core.phase import log_evidence_batch
+from mixture_ip_ros.core.playback import absorbed_rows, observed_rows
 from mixture_ip_ros.core.promp import expected_sq_residual, observation_stats, ridge_weights
 
 # Ridges tried on a class's weight covariance, as fractions of the mean weight variance.
@@ -67,9 +67,9 @@ class PerClassProMP:
         return self
 
     def predict_prefix(self, demo, fraction):
-        n = prefix_length(demo, fraction)
-        ok = ~np.isnan(demo.observed[:n]).any(axis=1)
-        t, Y = demo.t[:n][ok], demo.observed[:n][ok]
+        rows = observed_rows(demo)
+        rows = rows[rows < prefix_length(demo, fraction)]
+        t, Y = demo.t[rows], demo.observed[rows]
         ll = [log_evidence_batch(m, C, self.basis_, t, Y, 1.0 / demo.duration, self.noise_var_)
               for m, C in zip(self.means_, self.covariances_)]
         return self.classes_[int(np.argmax(ll))]
@@ -156,8 +156,7 @@ class NearestNeighbour:
         self.translation = translation
 
     def _series(self, demo):
-        rows = np.flatnonzero(~np.isnan(demo.observed).any(axis=1))
-        rows = rows[decimated_rows(demo.t[rows], self.min_interval)]
+        rows = absorbed_rows(demo, self.min_interval)
         t, Y = demo.t[rows], np.array(demo.observed[rows], dtype=np.double)
         moved = self._moved_observed
         if moved:

@@ -14,11 +14,13 @@ import numpy as np
 
 from mixture_ip_ros.app.evaluation.common import (REPORT_FRACTIONS, EvalConfig,
                                                   fold_indices, last_observed_row,
-                                                  loo_by_components, majority_labels, prepare,
-                                                  rms_vs_k_dict, trained, with_default_noise)
+                                                  loo_by_components, majority_labels,
+                                                  rms_vs_k_dict, subsampled, trained,
+                                                  with_default_noise)
 from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.selection import select_n_components
-from mixture_ip_ros.core.online import OnlineEstimator, prefixes
+from mixture_ip_ros.core.online import OnlineEstimator
+from mixture_ip_ros.core.playback import prefixes
 from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE
 from mixture_ip_ros.robot.kinematics import RobotKinematics
 from mixture_ip_ros.viz import plots
@@ -38,7 +40,7 @@ def evaluate_box_assembly(demos, out_dir: Path, config: EvalConfig = None,
     config = with_default_noise(config or box_config(), WRIST_OBSERVATION_NOISE)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    demos = prepare(demos, config.subsample)
+    demos = subsampled(demos, config.subsample)
     if any(d.label is None for d in demos):
         raise ValueError('box_assembly evaluation needs labelled demonstrations')
     kin = kinematics or RobotKinematics()

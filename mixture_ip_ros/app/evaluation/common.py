@@ -14,13 +14,15 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from mixture_ip_ros.app.training import component_labels, train
+from mixture_ip_ros.app.naming import component_labels
+from mixture_ip_ros.app.training import train
+from mixture_ip_ros.core.crossval import fold_scores, leave_one_out
 from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.core.interaction import trajectory_distribution
 from mixture_ip_ros.core.mixture import MixtureIProMP
-from mixture_ip_ros.core.selection import controlled_rms
-from mixture_ip_ros.core.online import (OnlineEstimator, decimated_rows, observed_rows,
-                                        played_to, prefixes)
+from mixture_ip_ros.core.scores import controlled_rms
+from mixture_ip_ros.core.online import OnlineEstimator
+from mixture_ip_ros.core.playback import absorbed_rows, observed_rows, played_to, prefixes
 
 logger = logging.getLogger(__name__)
 
@@ -60,7 +62,7 @@ def with_default_noise(config: EvalConfig, observation_noise) -> EvalConfig:
     return replace(config, model={'observation_noise': observation_noise, **config.model})
 
 
-def prepare(demos, subsample: int = 1) -> list:
+def subsampled(demos, subsample: int = 1) -> list:
     """Every ``subsample``-th time step, always keeping the final one (the thesis's observation)."""
     if subsample <= 1:
         return list(demos)
@@ -78,27 +80,32 @@ def fold_indices(n: int, stride: int) -> np.ndarray:
 
 
 def last_observed_row(demo) -> int:
-    rows = observed_rows(demo)
-    return int(rows[-1])
+    return int(observed_rows(demo)[-1])
 
 
 def loo_by_components(demos, candidates, folds, model_params, keep_predictions=False):
-    """Leave-one-out over the held-out ``folds`` for every K: per-fold RMS of the controlled
-    trajectory given the final wrist position (core ``controlled_rms``, as training uses), and
-    optionally the predicted mean joint trajectories {K: [(T, Q) per fold]}."""
-    rms = np.empty((len(candidates), len(folds)))
+    """Leave-one-out over the held-out ``folds`` (indices; core.crossval.leave_one_out, each
+    model fitted from the other demonstrations) for every K: per-fold RMS of the controlled
+    trajectory given the final wrist position (core.scores.controlled_rms), and optionally
+    the predicted mean joint trajectories {K: [(T, Q) per fold]}."""
     preds = {int(K): [] for K in candidates}
+
+    def fit(fold, K):
+        return MixtureIProMP(n_components=K, **model_params).fit([demos[j] for j in fold.train])
+
+    def score(model, fold, K):
+        test = demos[fold.test[0]]
+        rms = controlled_rms(model, test, 'final')
+        if keep_predictions:
+            r = last_observed_row(test)
+            z = test.phase
+            preds[K].append(model.predict_controlled(z[r:r + 1], test.observed[r:r + 1],
+                                                     z)['position'])
+        return rms
+    held_out = leave_one_out(len(demos), folds)
+    rms = np.empty((len(candidates), len(folds)))
     for a, K in enumerate(candidates):
-        for b, i in enumerate(folds):
-            train = demos[:i] + demos[i + 1:]
-            model = MixtureIProMP(n_components=int(K), **model_params).fit(train)
-            test = demos[i]
-            rms[a, b] = controlled_rms(model, test, 'final')
-            if keep_predictions:
-                r = last_observed_row(test)
-                z = test.phase
-                preds[int(K)].append(model.predict_controlled(z[r:r + 1], test.observed[r:r + 1],
-                                                              z)['position'])
+        rms[a] = fold_scores(held_out, fit, score, (int(K),), n_jobs=1)
     return rms, preds
 
 
@@ -108,7 +115,7 @@ def rms_vs_k_dict(candidates, rms):
 
 def majority_labels(model, demos):
     """The name of each component: the majority label of its training demonstrations
-    (training.component_labels); labels are read for scoring only."""
+    (app.naming.component_labels); labels are read for scoring only."""
     labels = component_labels(model, demos)
     if labels is None:
         raise ValueError('evaluation needs labelled demonstrations (labels are used for scoring)')
@@ -167,8 +174,7 @@ def phase_known_components(model, demo, fractions, min_interval=0.05, duration=T
     known, hence also alpha = 1/T and (``duration``) its evidence p(alpha | k). The samples are
     the ones the online estimator absorbs (``min_interval``), so phase known and unknown differ
     in the phase only."""
-    rows = observed_rows(demo)
-    rows = rows[decimated_rows(demo.t[rows], min_interval)]
+    rows = absorbed_rows(demo, min_interval)
     out = []
     for f in fractions:
         use = rows[rows < prefix_length(demo, f)]

@@ -19,6 +19,7 @@ from mixture_ip_ros.app.evaluation.common import (EvalConfig, majority_labels,
                                                   online_component_given_end, online_components,
                                                   phase_known_components, trained)
 from mixture_ip_ros.core.mixture import MixtureIProMP
+from mixture_ip_ros.core.warped import PhaseWarps
 from mixture_ip_ros.viz import plots
 
 GESTURE_FRACTIONS = (0.3, 0.5, 0.7, 1.0)
@@ -86,7 +87,8 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
     # Supervised: one component per class, tied noise and one covariance prior for all.
     t0 = time.perf_counter()
     sup_model = MixtureIProMP(n_components=len(classes), random_state=seed, **params).fit(
-        train, labels=y_train).fit_warps(train)
+        train, labels=y_train)
+    sup_model.warps_ = PhaseWarps().fit(sup_model, train)
     cls = sup_model.classes_
     sup = accuracy([[cls[k] for k in online_components(sup_model, d, fractions, config.n_alpha,
                                                        config.min_interval)] for d in test],
@@ -115,7 +117,8 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
     # with the same K. Shows what the unsupervised fit does when the selection cannot choose.
     t0 = time.perf_counter()
     Kc = len(classes)
-    ref = MixtureIProMP(n_components=Kc, random_state=seed, **params).fit(train).fit_warps(train)
+    ref = MixtureIProMP(n_components=Kc, random_state=seed, **params).fit(train)
+    ref.warps_ = PhaseWarps().fit(ref, train)
     ref_names = majority_labels(ref, train)
     ref_acc = accuracy([[ref_names[k] for k in online_components(
         ref, d, fractions, config.n_alpha, config.min_interval)] for d in test], y_test)

@@ -42,7 +42,8 @@ import numpy as np
 from mixture_ip_ros.app.evaluation.baselines import NearestNeighbour, clustering_baselines
 from mixture_ip_ros.app.evaluation.common import (EvalConfig, majority_labels,
                                                   phase_known_components, trained)
-from mixture_ip_ros.core.online import OnlineEstimator, prefix_predictions
+from mixture_ip_ros.core.online import OnlineEstimator
+from mixture_ip_ros.core.playback import observed_rows, prefix_predictions, rest_rows
 from mixture_ip_ros.viz import plots
 
 FRACTIONS = (0.3, 0.5, 0.7, 1.0)
@@ -88,7 +89,7 @@ def _ari(a, b) -> float:
     return float(adjusted_rand_score(a, b))
 
 
-def _errors(pred, truth):
+def path_errors(pred, truth):
     """(RMS over the samples, error at the last one), metres."""
     d = np.linalg.norm(pred - truth, axis=1)
     return float(np.sqrt(np.mean(d ** 2))), float(d[-1])
@@ -145,7 +146,8 @@ def _fold(demos, labels, fold, config: EvalConfig, seed: int, f: int) -> dict:
     contacts = [contact_row(demos[i]) for i in test_i]
     examples, timings = {}, {}
     t0 = time.perf_counter()
-    # One thread per fold's training: the folds already fill the cores, a process each (_run).
+    # One thread per fold's training: the folds already fill the cores, a process each
+    # (run_in_processes).
     fit = partial(trained, train, config, n_jobs=1)
     model, info = fit(random_state=seed)
     single, _ = fit(n_components=1)
@@ -158,7 +160,7 @@ def _fold(demos, labels, fold, config: EvalConfig, seed: int, f: int) -> dict:
     comp_train = np.argmax(model.resp_, axis=1)
     heldout = [int(np.argmax(model.component_posterior(
         demos[i].phase[ok], demos[i].observed[ok], alpha=1.0 / demos[i].duration)))
-        for i in test_i for ok in [~np.isnan(demos[i].observed).any(axis=1)]]
+        for i in test_i for ok in [observed_rows(demos[i])]]
     t0 = time.perf_counter()
     namers = {'mixture': (model, names), 'single': (single, majority_labels(single, train)),
               'supervised': (supervised, list(supervised.classes_)),
@@ -176,7 +178,7 @@ def _fold(demos, labels, fold, config: EvalConfig, seed: int, f: int) -> dict:
                     # against the recording's own progress t / T at the prefix's end
                     phase_error[r, c] = fractions[c] * abs(alpha * demos[i].duration - 1.0)
                 if pred is not None and has_partner:
-                    rms[m][r, c], final[m][r, c] = _errors(pred, demos[i].controlled[rest])
+                    rms[m][r, c], final[m][r, c] = path_errors(pred, demos[i].controlled[rest])
                     contact[m][r, c] = _at_contact(pred, rest, contacts[r], demos[i].controlled)
                     if m == 'mixture' and abs(fractions[c] - 0.5) < 1e-9:
                         examples.setdefault(labels[i], (i, rest, pred, nm[k]))
@@ -189,12 +191,11 @@ def _fold(demos, labels, fold, config: EvalConfig, seed: int, f: int) -> dict:
     for r, i in enumerate(test_i):
         d = demos[i]
         for c, (j, scale, shift) in enumerate(nn.matches(d, fractions)):
-            rest = np.flatnonzero((d.t > fractions[c] * d.duration + 1e-9)
-                                  & ~np.isnan(d.controlled).any(axis=1))
+            rest = rest_rows(d, fractions[c] * d.duration)
             label, pred = nn.predict(j, scale, d.t[rest], shift)
             right['nearest'][r, c] = label == labels[i]
             if rest.size and has_partner:
-                rms['nearest'][r, c], final['nearest'][r, c] = _errors(pred, d.controlled[rest])
+                rms['nearest'][r, c], final['nearest'][r, c] = path_errors(pred, d.controlled[rest])
                 contact['nearest'][r, c] = _at_contact(pred, rest, contacts[r], d.controlled)
     timings['baselines_s'] = time.perf_counter() - t0
     summary = {'n_components': int(info['n_components']),
@@ -212,7 +213,7 @@ def _fold(demos, labels, fold, config: EvalConfig, seed: int, f: int) -> dict:
             'timings': timings}
 
 
-def _fold_tasks(demos, config: EvalConfig, seed: int) -> list:
+def fold_tasks(demos, config: EvalConfig, seed: int) -> list:
     """The folds of :func:`evaluate_labelled` as independent tasks (checked first)."""
     labels = np.array([d.label for d in demos])
     if any(lbl is None for lbl in labels):
@@ -225,7 +226,7 @@ def _fold_tasks(demos, config: EvalConfig, seed: int) -> list:
     return [partial(_fold, demos, labels, fold, config, seed, f) for f in range(N_FOLDS)]
 
 
-def _run(tasks) -> list:
+def run_in_processes(tasks) -> list:
     """The tasks' results in order, one process per core. Each task is pickled to its worker
     with its recordings. The workers are forked from a server process that imported this
     module and nothing else (multiprocessing's forkserver), not from the caller: a worker
@@ -249,10 +250,11 @@ def evaluate_labelled(demos, out_dir: Path, config: EvalConfig = None, name: str
     metres), else in the DOFs' own unit."""
     config = config or interactions_config()
     demos = list(demos)
-    return _metrics(demos, _run(_fold_tasks(demos, config, seed)), out_dir, config, name, cm)
+    return fold_metrics(demos, run_in_processes(fold_tasks(demos, config, seed)), out_dir, config,
+                        name, cm)
 
 
-def _metrics(demos, results, out_dir: Path, config: EvalConfig, name: str, cm: bool) -> dict:
+def fold_metrics(demos, results, out_dir: Path, config: EvalConfig, name: str, cm: bool) -> dict:
     """:func:`evaluate_labelled`'s metrics and plots from its folds' results."""
     labels = np.array([d.label for d in demos])
     classes = sorted(set(labels.tolist()), key=str)
@@ -375,10 +377,10 @@ def evaluate_nuisi(out_dir: Path, config: EvalConfig = None, seed: int = 0,
     # Every version's folds in one pool, the version with more samples first (its folds take
     # longest), so that the cores stay busy to the end.
     order = sorted(versions, key=lambda v: -sum(len(d.t) for d in sets[v]))
-    results = _run([t for v in order for t in _fold_tasks(sets[v], config, seed)])
+    results = run_in_processes([t for v in order for t in fold_tasks(sets[v], config, seed)])
     out = {}
     for g, v in enumerate(order):
         out[v] = {'source': nuisi.SOURCE.format(version=v, commit=nuisi.VERSIONS[v].commit),
-                  **_metrics(sets[v], results[g * N_FOLDS:(g + 1) * N_FOLDS], out_dir, config,
+                  **fold_metrics(sets[v], results[g * N_FOLDS:(g + 1) * N_FOLDS], out_dir, config,
                              f'nuisi_{v}', cm=True)}
     return {v: out[v] for v in versions}

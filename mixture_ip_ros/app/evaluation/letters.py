@@ -15,7 +15,8 @@ from scipy import linalg
 from mixture_ip_ros.app.evaluation.common import (EvalConfig, observed_prediction,
                                                   trained, with_default_noise)
 from mixture_ip_ros.core.mixture import MixtureIProMP
-from mixture_ip_ros.core.online import OnlineEstimator, prefixes
+from mixture_ip_ros.core.online import OnlineEstimator
+from mixture_ip_ros.core.playback import prefixes
 from mixture_ip_ros.core.promp import observation_stats, weight_posterior
 from mixture_ip_ros.scenarios.letters import LETTER_OBSERVATION_NOISE
 from mixture_ip_ros.viz import plots

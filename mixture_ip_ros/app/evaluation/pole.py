@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from mixture_ip_ros.app.evaluation.common import (EvalConfig, fold_indices, loo_by_components,
-                                                  prepare, rms_vs_k_dict, trained,
+                                                  rms_vs_k_dict, subsampled, trained,
                                                   with_default_noise)
 from mixture_ip_ros.core.selection import select_n_components
 from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE
@@ -33,7 +33,7 @@ def evaluate_pole(demos, out_dir: Path, config: EvalConfig = None, kinematics=No
     config = with_default_noise(config or pole_config(), WRIST_OBSERVATION_NOISE)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    demos = prepare(demos, config.subsample)
+    demos = subsampled(demos, config.subsample)
     kin = kinematics or RobotKinematics()
     candidates = [int(k) for k in config.candidates if k <= len(demos) - 1]
     if 1 not in candidates:

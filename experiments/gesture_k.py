@@ -16,7 +16,7 @@ On the 50 training gestures (labels used only where a row says so):
   scikit-learn GaussianMixture's on the same weights with the same K (the evaluation's
   baseline), in %.
 
-    OPENBLAS_NUM_THREADS=1 python bench/gesture_k.py
+    OPENBLAS_NUM_THREADS=1 python experiments/gesture_k.py
 """
 
 import json
@@ -32,7 +32,8 @@ from mixture_ip_ros.app.evaluation.common import (majority_labels,  # noqa: E402
                                                   online_components)
 from mixture_ip_ros.app.evaluation.gestures import GESTURE_FRACTIONS  # noqa: E402
 from mixture_ip_ros.core.mixture import MixtureIProMP  # noqa: E402
-from mixture_ip_ros.core.selection import calibrated_heldout_curves, cv_folds, selection_curve  # noqa: E402
+from mixture_ip_ros.core.crossval import cv_folds  # noqa: E402
+from mixture_ip_ros.core.selection import calibrated_heldout_curves, selection_curve  # noqa: E402
 from mixture_ip_ros.scenarios.gestures import gesture_demonstrations  # noqa: E402
 
 CANDIDATES = list(range(1, 16))

@@ -9,18 +9,21 @@ person after 30/50/70/100 % of the recording, for three cuts of every recording:
 Methods: the supervised mixture (one component per person) online with the phase unknown and
 with the phase known (the same decimated samples), and the per-class ProMP baseline.
 
-    OPENBLAS_NUM_THREADS=1 python bench/gesture_representation.py
+    OPENBLAS_NUM_THREADS=1 python experiments/gesture_representation.py
 """
 
 import json
 import os
+import sys
 import time
+from pathlib import Path
 
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # the checkout: bench._common
 
 import numpy as np  # noqa: E402
 
-from _common import segment_rest_deviation  # noqa: E402
+from bench._common import segment_rest_deviation  # noqa: E402
 from mixture_ip_ros.app.evaluation.baselines import PerClassProMP  # noqa: E402
 from mixture_ip_ros.app.evaluation.common import (online_components,  # noqa: E402
                                                   phase_known_components)

@@ -25,7 +25,7 @@ held-out recordings, cm, as docs/results.md):
   movement at the speeds of the prior or of a tempered posterior: the one-step version of a
   phase velocity in the state);
 - online, the warp tracked (the issue's item 2 in its exact form, by brute force): each
-  component's Gaussian over the warp as training learns it (MixtureIProMP.fit_warps; learned
+  component's Gaussian over the warp as training learns it (core.warped.PhaseWarps; learned
   here also where training chose the linear phase), and the posterior over the speed grid and
   the warp given the prefix, the warp integrated out two ways: over N_POINTS fixed points of
   the Gaussian (exact for that set of hypotheses, each a Kalman state the estimator would
@@ -53,7 +53,7 @@ With ``--pace-changed`` every recording first gets the people's pace changed wit
 movement (scenarios.corruption.retimed, the robustness bench's ``tempo``): holds and hurries a
 warp is made for.
 
-    OPENBLAS_NUM_THREADS=1 python bench/nonlinear_phase.py [--versions v1,v2] [--pace-changed]
+    OPENBLAS_NUM_THREADS=1 python experiments/nonlinear_phase.py [--versions v1,v2] [--pace-changed]
 """
 
 import argparse
@@ -75,11 +75,14 @@ from sklearn.preprocessing import StandardScaler  # noqa: E402
 from mixture_ip_ros.app.evaluation.common import trained  # noqa: E402
 from mixture_ip_ros.app.evaluation.interactions import (interactions_config,  # noqa: E402
                                                         stratified_folds)
-from mixture_ip_ros.core.online import (OnlineEstimator, decimated_rows,  # noqa: E402
-                                        observed_rows, prefix_predictions, prefixes, supported)
+from mixture_ip_ros.core.online import OnlineEstimator, supported  # noqa: E402
+from mixture_ip_ros.core.playback import (absorbed_rows, observed_rows,  # noqa: E402
+                                          prefix_predictions, prefixes, rest_rows)
 from mixture_ip_ros.core.phase import tempered_speed_posterior  # noqa: E402
 from mixture_ip_ros.core.promp import observation_stats, weight_posterior  # noqa: E402
 from mixture_ip_ros.core.warp import N_WARP, laplace, map_warp, registered, warp  # noqa: E402
+from mixture_ip_ros.core.warped import (PhaseWarps, WarpEvidence,  # noqa: E402
+                                        observed_prior)
 from mixture_ip_ros.scenarios.corruption import corrupted  # noqa: E402
 
 FRACTIONS = (0.3, 0.5, 0.7)
@@ -110,7 +113,7 @@ class Observed:
         self.model, self.k = model, k
         self.mean = model.means_[k][:do]
         self.chol = linalg.cho_factor(model.covariances_[k][:do, :do], lower=True)
-        self.noise = model._observed_noise(k, interval)
+        self.noise = model.observed_noise(k, interval)
         C = model.covariances_[k]
         self.gain = linalg.cho_solve(self.chol, C[:do, do:]).T   # controlled on observed
 
@@ -135,7 +138,7 @@ class Observed:
 def fit_warp(comp, demo, prior_sd):
     """The MAP b of ``demo``'s observed path under ``comp`` and N(0, prior_sd^2 I), and whether
     the optimiser converged (a recording whose fit does not converge keeps the linear phase)."""
-    ok = ~np.isnan(demo.observed).any(axis=1)
+    ok = observed_rows(demo)
     u, y = demo.phase[ok], demo.observed[ok]
     return map_warp(lambda b: comp.posterior(warp(u, b), y)[1], np.zeros(N_WARP), prior_sd)
 
@@ -147,13 +150,10 @@ def rms(pred, truth):
 def prefixes_and_rests(demo, config):
     """For each of FRACTIONS f: (times, positions) of the observed agent's samples the estimator
     absorbs up to f T, and the samples after f T where the controlled agent was recorded."""
-    rows = observed_rows(demo)
-    used = rows[decimated_rows(demo.t[rows], config.min_interval)]
-    recorded = ~np.isnan(demo.controlled).any(axis=1)
+    used = absorbed_rows(demo, config.min_interval)
     for f in FRACTIONS:
         sel = used[demo.t[used] <= f * demo.duration + 1e-9]
-        yield demo.t[sel], demo.observed[sel], np.flatnonzero(
-            (demo.t > f * demo.duration + 1e-9) & recorded)
+        yield demo.t[sel], demo.observed[sel], rest_rows(demo, f * demo.duration)
 
 
 def online(model, warps, demo, config, etas):
@@ -164,7 +164,7 @@ def online(model, warps, demo, config, etas):
     b_s) (S = 1: one warp per component), p(b_s | D, k, alpha) ~ p(D | k, alpha, b_s)."""
     est = OnlineEstimator(model, n_alpha=config.n_alpha, min_interval=config.min_interval)
     K, M, S = model.n_components, len(est.alphas), warps.shape[1]
-    log_prior = est._log_prior.reshape(K, M)
+    log_prior = est.log_prior
     comps = [Observed(model, k, config.min_interval) for k in range(K)]
     out = {eta: [] for eta in etas}
     for t, y, rest in prefixes_and_rests(demo, config):
@@ -201,21 +201,21 @@ def online(model, warps, demo, config, etas):
 
 def online_laplace(model, demo, config):
     """Partner RMS after each fraction, T unknown, the warp integrated out at each grid speed by
-    Laplace's method under the component's learned Gaussian (MixtureIProMP.fit_warps):
+    Laplace's method under the component's learned Gaussian (core.warped.PhaseWarps):
     p(D | k, alpha) = int p(D | k, alpha, b) p(b | k) db at the MAP b of that speed, whose
     phase g(alpha t; b) then places the rest; the speed under the model's speed weight."""
     est = OnlineEstimator(model, n_alpha=config.n_alpha, min_interval=config.min_interval)
     K, M = model.n_components, len(est.alphas)
-    log_prior = est._log_prior.reshape(K, M)
+    log_prior = est.log_prior
     comps = [Observed(model, k, config.min_interval) for k in range(K)]
-    priors = [model._observed_prior(k) for k in range(K)]
+    priors = [observed_prior(model, k) for k in range(K)]
     out = []
     for t, y, rest in prefixes_and_rests(demo, config):
         evidence, b = np.full((K, M), -np.inf), np.zeros((K, M, N_WARP))
         for k in range(K):
-            prior = model.warp_mean_[k], model.warp_sd_[k]
+            prior = model.warps_.mean_[k], model.warps_.sd_[k]
             for m, a in enumerate(est.alphas):
-                ev = model._warp_evidence(k, a * t, y, config.min_interval, priors[k])
+                ev = WarpEvidence(model, k, a * t, y, config.min_interval, priors[k])
                 b[k, m], converged = map_warp(ev, *prior, gradient=True)
                 if converged:           # else the speed is left out, as training leaves it
                     evidence[k, m] = laplace(ev, b[k, m], *prior)[0]
@@ -278,8 +278,7 @@ def horizons(comps, k, est, demo, config, durations):
     every component's Observed; ``k``: the recording's own (the oracles'; the causal DTW takes
     the estimator's MAP component, as the package does); ``durations``: each component's mean
     training duration (its DTW template's sampling)."""
-    rows = observed_rows(demo)
-    used = rows[decimated_rows(demo.t[rows], config.min_interval)]
+    used = absorbed_rows(demo, config.min_interval)
     T = demo.duration
     # the sensor's sample interval after decimation (a property of the stream, not of the future)
     dt = float(np.median(np.diff(demo.t[used])))
@@ -333,11 +332,9 @@ def durations_told(comps, k, est, demo, config, same, durations):
     leave-one-out, the prediction kept within the training durations) on the observed path at
     SHAPE_POINTS phases up to the fraction, each recording read at its own true phase t / T
     (Fitts: a longer reach may take longer)."""
-    rows = observed_rows(demo)
-    used = rows[decimated_rows(demo.t[rows], config.min_interval)]
+    used = absorbed_rows(demo, config.min_interval)
     T = demo.duration
     dt = float(np.median(np.diff(demo.t[used])))
-    recorded = ~np.isnan(demo.controlled).any(axis=1)
 
     def at_phase(d, z):              # d's observed path at its true phases z = t / T
         ok = observed_rows(d)
@@ -369,7 +366,7 @@ def durations_told(comps, k, est, demo, config, same, durations):
     for fraction, cut in zip(FRACTIONS, prefixes(est, demo, np.multiply(FRACTIONS, T))):
         sel = used[demo.t[used] <= cut + 1e-9]
         t, y = demo.t[sel], demo.observed[sel]
-        rest = np.flatnonzero((demo.t > cut + 1e-9) & recorded)
+        rest = rest_rows(demo, cut)
         m, p = est.speed_hypotheses(k)
         told = (durations[k], float(p @ (1.0 / est.alphas[m])),
                 t[-1] / max(aligned_phases(y, mean_path, open_end=True)[-1], 1e-3),
@@ -401,11 +398,11 @@ def version(v, prior_sd, pace_changed=False):
         train = [demos[i] for i in train_i]
         model, info = trained(train, config, n_jobs=1, labels=labels[train_i])
         chosen.append(info['phase']['chosen'])
-        if model.warp_mean_ is None:        # training chose the linear phase: warps anyway
-            model.fit_warps(train)
-        failed_learned += [str(x) for x in model.warp_failed_]
+        if model.warps_ is None:            # training chose the linear phase: warps anyway
+            model.warps_ = PhaseWarps().fit(model, train)
+        failed_learned += [str(x) for x in model.warps_.failed_]
         # The online warp's points: the same standard normal points for every component.
-        points = model.warp_mean_[:, None] + model.warp_sd_[:, None] * WARP_POINTS
+        points = model.warps_.mean_[:, None] + model.warps_.sd_[:, None] * WARP_POINTS
         names = list(model.classes_)
         comp_of = [names.index(labels[i]) for i in train_i]
         fits = [fit_warp(Observed(model, k), d, prior_sd) for k, d in zip(comp_of, train)]

@@ -33,7 +33,7 @@ K = 3, 6, 12 components (box assembly fitted with that K) with M = 50, 100 phase
 hypotheses each (n_alpha): per (K, M) e2e_ms_{median,p99}, n_samples and the node's own
 estimator_{update,plan}_us_mean; relay_ms_{median,p99} from relay runs interleaved with them
 (one per K). bench/estimator.py gives the update alone on the same grid.
-Run: .venv/bin/python bench/latency.py [--demos 4] [--repeats 3] [--rates 250,500,1000,2000]
+Run: .venv/bin/python experiments/latency.py [--demos 4] [--repeats 3] [--rates 250,500,1000,2000]
 [--no-scaling]
 Timing only, no assertions.
 """
@@ -52,6 +52,7 @@ from pathlib import Path
 
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # the checkout: bench._common
 
 import numpy as np  # noqa: E402
 import rclpy  # noqa: E402
@@ -62,7 +63,7 @@ from geometry_msgs.msg import PointStamped, PoseStamped  # noqa: E402
 from std_msgs.msg import Header  # noqa: E402
 from trajectory_msgs.msg import JointTrajectory  # noqa: E402
 
-from _common import (ESTIMATOR_PARAMS, ESTIMATOR_YAML, EVERY_POSE, GAP_S,  # noqa: E402
+from bench._common import (ESTIMATOR_PARAMS, ESTIMATOR_YAML, EVERY_POSE, GAP_S,  # noqa: E402
                      OBSERVER_PARAMS, OBSERVER_YAML, Stream, as_parameters, padded_wrist)
 from mixture_ip_ros.app.training import train_to_file  # noqa: E402
 from mixture_ip_ros.core.stamps import ns_to_parts, stamp_to_ns  # noqa: E402

@@ -18,7 +18,7 @@ online estimator does with the data (alpha grid, prior spread, decimation).
 - box assembly (leave-one-out, 48 demonstrations): online selection in % and hand error in cm
   after 30/50/70/100 %, as evaluated (grid MAP), refined, 1000 alphas over +-6, every sample.
 
-    OPENBLAS_NUM_THREADS=1 python bench/phase_gap.py
+    OPENBLAS_NUM_THREADS=1 python experiments/phase_gap.py
 """
 
 import copy
@@ -30,13 +30,14 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 import numpy as np  # noqa: E402
 
-from mixture_ip_ros.app.evaluation.common import (decimated_rows,  # noqa: E402
-                                                  majority_labels, online_component_given_end,
+from mixture_ip_ros.app.evaluation.common import (majority_labels,  # noqa: E402
+                                                  online_component_given_end,
                                                   online_components, phase_known_components)
 from mixture_ip_ros.app.evaluation.gestures import GESTURE_FRACTIONS  # noqa: E402
 from mixture_ip_ros.core.interaction import trajectory_distribution  # noqa: E402
 from mixture_ip_ros.core.mixture import MixtureIProMP  # noqa: E402
-from mixture_ip_ros.core.online import OnlineEstimator, prefixes  # noqa: E402
+from mixture_ip_ros.core.online import OnlineEstimator  # noqa: E402
+from mixture_ip_ros.core.playback import absorbed_rows, prefixes  # noqa: E402
 from mixture_ip_ros.io.dataset import WRIST_OBSERVATION_NOISE  # noqa: E402
 from mixture_ip_ros.scenarios.folders import generate  # noqa: E402
 from mixture_ip_ros.scenarios.letters import LETTER_OBSERVATION_NOISE, phase_letters  # noqa: E402
@@ -107,7 +108,7 @@ def letters():
         rms, err = [], []
         for d, a_true in zip(data.test, true_alpha):
             est = OnlineEstimator(model, **settings)
-            rows = decimated_rows(d.t, settings['min_interval'])
+            rows = absorbed_rows(d, settings['min_interval'])
             r, e, done = [], [], 0
             for f in fr:
                 last = int(np.ceil(f * d.t.size)) - 1

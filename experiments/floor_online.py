@@ -10,7 +10,7 @@ interaction recognised online from the first 30 / 50 / 70 / 100 % of the held-ou
 held-out likelihood the calibration reads (phase known, both agents, mean per recording over
 the training recordings' inner folds, as core.selection computes it).
 
-    OPENBLAS_NUM_THREADS=1 python bench/floor_online.py [--version v2] [--floors 0.1,0.02]
+    OPENBLAS_NUM_THREADS=1 python experiments/floor_online.py [--version v2] [--floors 0.1,0.02]
 """
 
 import argparse
@@ -20,9 +20,10 @@ import time
 import numpy as np
 
 from mixture_ip_ros.app.evaluation.common import majority_labels, trained
-from mixture_ip_ros.app.evaluation.interactions import (FRACTIONS, N_FOLDS, _errors,
+from mixture_ip_ros.app.evaluation.interactions import (FRACTIONS, N_FOLDS, path_errors,
                                                         interactions_config, stratified_folds)
-from mixture_ip_ros.core.online import OnlineEstimator, prefix_predictions
+from mixture_ip_ros.core.online import OnlineEstimator
+from mixture_ip_ros.core.playback import prefix_predictions
 from mixture_ip_ros.core.selection import calibrated_heldout_curves
 from mixture_ip_ros.scenarios import nuisi
 
@@ -63,7 +64,7 @@ def main():
                                                                      FRACTIONS)):
                     right[key][i, c] = names[k] == labels[i]
                     if pred is not None:
-                        rms[key][i, c] = _errors(pred, demos[i].controlled[rest])[0]
+                        rms[key][i, c] = path_errors(pred, demos[i].controlled[rest])[0]
         per_fold.append({'n_components': K, 'calibrated_floor': info['prior_scale'],
                          'heldout_loglik': {f'{s:g}': float(v) for s, v in
                                             zip(floors, curves['loglik']['mean_by_scale'][:, 0])}})

@@ -19,7 +19,7 @@ recording given to the component that explains it best with its warp (so that re
 may move it to another one), the mixture refitted from there; then K chosen again.
 ``--learn-prior`` learns each template's Gaussian over b (eq. 34's prior, per component).
 
-    OPENBLAS_NUM_THREADS=1 python bench/registered_discovery.py [--versions v1,v2]
+    OPENBLAS_NUM_THREADS=1 python experiments/registered_discovery.py [--versions v1,v2]
         [--iterations 3] [--prior-sd 0.3] [--learn-prior] [--templates component,common,em]
 """
 
@@ -36,7 +36,7 @@ from scipy import linalg  # noqa: E402
 from sklearn.metrics import adjusted_rand_score  # noqa: E402
 
 from mixture_ip_ros.app.evaluation.common import trained  # noqa: E402
-from mixture_ip_ros.app.evaluation.interactions import _run, interactions_config  # noqa: E402
+from mixture_ip_ros.app.evaluation.interactions import run_in_processes, interactions_config  # noqa: E402
 from mixture_ip_ros.core.mixture import MixtureIProMP  # noqa: E402
 from mixture_ip_ros.core.noise import noise_factor  # noqa: E402
 from mixture_ip_ros.core.promp import observation_stats, weight_posterior  # noqa: E402
@@ -163,7 +163,7 @@ def main():
     t0 = time.perf_counter()
     runs = [(v, c, m) for v in args.versions.split(',') for c in CASES
             for m in args.templates.split(',')]
-    results = _run([partial(em_rounds, v, c, args.iterations, args.prior_sd, args.learn_prior)
+    results = run_in_processes([partial(em_rounds, v, c, args.iterations, args.prior_sd, args.learn_prior)
                     if m == 'em' else
                     partial(rounds, v, c, m, args.iterations, args.prior_sd, args.learn_prior)
                     for v, c, m in runs])

@@ -1,6 +1,6 @@
 """Where the time goes inside observer_node and estimator_node, per pose.
 
-The nodes of bench/latency.py (its model, and the stream, parameters and every-pose replanning
+The nodes of experiments/latency.py (its model, and the stream, parameters and every-pose replanning
 it takes from bench/_common.py), but their callbacks are called directly in this one thread at
 the stream's pace (poses stamped with the node clock when fed): the observer's observation and
 event publishers hand their messages straight to the estimator's callbacks, so the time of a
@@ -13,7 +13,7 @@ per_pose_ms_{median,p99} (observer callback, estimator's work included) and to_t
 {median,p99} (from the observer callback's start to the trajectory handed to its publisher),
 both over the poses with a plan; stages: per stage the mean microseconds per pose and per call
 and the number of calls (nested stages are included in their callers).
-Run: .venv/bin/python bench/node_profile.py [--demos 4]
+Run: .venv/bin/python experiments/node_profile.py [--demos 4]
 Timing only, no assertions.
 """
 
@@ -22,17 +22,19 @@ import collections
 import functools
 import json
 import os
+import sys
 import tempfile
 import time
 from pathlib import Path
 
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # the checkout: bench._common
 
 import numpy as np  # noqa: E402
 import rclpy  # noqa: E402
 from rclpy.context import Context  # noqa: E402
 
-from _common import (ESTIMATOR_PARAMS, EVERY_POSE, OBSERVER_PARAMS, Stream,  # noqa: E402
+from bench._common import (ESTIMATOR_PARAMS, EVERY_POSE, OBSERVER_PARAMS, Stream,  # noqa: E402
                      as_parameters, padded_wrist)
 from mixture_ip_ros.app.training import train_to_file  # noqa: E402
 from mixture_ip_ros.core.stamps import ns_to_parts  # noqa: E402

@@ -17,7 +17,7 @@ error rule). 'sampled_tally': the K each criterion picks on ten single-agent set
 sampled patterns (seeds 0-9) at four within-pattern spreads, from well separated (0.002, the
 default) to overlapping (0.1). Prints one JSON object.
 
-    OPENBLAS_NUM_THREADS=1 python bench/selection_curves.py
+    OPENBLAS_NUM_THREADS=1 python experiments/selection_curves.py
 """
 
 import json

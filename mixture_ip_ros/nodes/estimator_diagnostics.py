@@ -1,0 +1,68 @@
+"""What estimator_node reports on /diagnostics: the planner's state, its counts and the node's
+latencies as one status, WARN while problems are new."""
+
+from diagnostic_msgs.msg import DiagnosticArray
+
+from mixture_ip_ros.nodes.diagnostics import OK, WARN, diagnostic_array
+
+DIAGNOSTIC_NAME = 'estimator_node: estimation'
+
+
+def estimation_values(planner, latency, plan_latency, events) -> dict:
+    """{key: value} of the status: the interaction in progress (``planner.current``), the
+    planner's totals, the latencies (estimation.records.LatencyStats: ``latency`` of a used
+    observation, ``plan_latency`` of a trajectory sent) and the unknown events counted."""
+    counts = planner.counts
+    rec = planner.current
+    return {
+        'state': planner.state,
+        'interactions': len(planner.interactions),
+        'component': rec and rec.component,
+        'label': rec and rec.label,
+        'confidence': rec and rec.confidence,
+        'alpha': rec and rec.alpha,
+        'phase': rec and rec.phase,
+        'commit_phase': rec and rec.commit_phase,
+        'switches': len(rec.switches) if rec else 0,
+        'observations_received': counts.received,
+        'observations_used': counts.used,
+        'observations_skipped': counts.skipped,
+        'observations_held': planner.n_held,
+        'observations_backlog': planner.n_backlog,
+        'interaction_observations_used': rec and rec.n_observations,
+        **{f'rejected_{k}': v for k, v in counts.rejected.items()},
+        'update_latency_last_us': round(latency.last_us, 1),
+        'update_latency_mean_us': round(latency.mean_us, 1),
+        'update_latency_max_us': round(latency.max_us, 1),
+        'plan_latency_last_us': round(plan_latency.last_us, 1),
+        'plan_latency_mean_us': round(plan_latency.mean_us, 1),
+        'plan_latency_max_us': round(plan_latency.max_us, 1),
+        'plans_sent': counts.plans_sent,
+        'holds_unexplained': counts.holds,
+        'unexplained': rec and rec.unexplained,
+        'plans_time_scaled': counts.plans_time_scaled,
+        **{f'plans_refused_{k}': v for k, v in counts.plan_refusals.items()},
+        'events_unknown': events['unknown'],
+    }
+
+
+class EstimationDiagnostics:
+    """estimator_node's /diagnostics messages. It remembers the problem totals of the previous
+    message: WARN while problems are new (since then); the totals stay in the values."""
+
+    def __init__(self):
+        self._seen = (0, 0)     # observations rejected, plans refused
+
+    def message(self, stamp, planner, latency, plan_latency, events) -> DiagnosticArray:
+        values = estimation_values(planner, latency, plan_latency, events)
+        counts = planner.counts
+        new_rejected = counts.n_rejected - self._seen[0]
+        new_failures = counts.plan_failures - self._seen[1]
+        self._seen = (counts.n_rejected, counts.plan_failures)
+        if new_failures:
+            level, message = WARN, f'{planner.state}; {new_failures} plans refused'
+        elif new_rejected:
+            level, message = WARN, f'{planner.state}; {new_rejected} observations rejected'
+        else:
+            level, message = OK, planner.state
+        return diagnostic_array(stamp, DIAGNOSTIC_NAME, level, message, values)
