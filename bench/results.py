@@ -116,7 +116,10 @@ ROBUSTNESS_ROWS = (
     ('noise', 'tracker noise (b)'), ('clock', 'tracker clock (c)'),
     ('half', 'half the training recordings (d)'), ('all', '(a) + (b) + (c)'),
     ('all_none', '(a) + (b) + (c), `--translation none`'), ('all_half', '(a) + (b) + (c) + (d)'),
-    ('tempo', "the people's pace (e)"))
+    ('tempo', "the people's pace (e)"), ('tempo_half', '(e) + (d)'),
+    ('tempo_abc', '(e) + (a) + (b) + (c)'),
+    ('tempo_one_label', '(e), one training recording of each interaction labelled (ARI: the '
+                        'others)'))
 
 
 def robustness_section(rob, kernels) -> list:
@@ -149,7 +152,8 @@ def robustness_section(rob, kernels) -> list:
                 if not c:
                     continue
                 ratio = (c.get('partner_vs_clean') or {}).get('0.5')
-                L.append(f"| {name} | {', '.join(map(str, c['k']))} | {c['ari']:.2f} "
+                ari = c.get('unlabelled_ari', c['ari'])     # semi-supervised: the unlabelled
+                L.append(f"| {name} | {', '.join(map(str, c['k']))} | {ari:.2f} "
                          f"({c['kmeans_ari']:.2f}) | {fractions(c['recognised'])} % | "
                          f"{fractions(c['supervised'])} % | {fractions(c['nn_dtw'])} % | "
                          f"{cm(c['partner_cm'])} ({'-' if ratio is None else f'{ratio:.2f}'}) | "

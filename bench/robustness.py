@@ -9,8 +9,10 @@ both people (2 cm, correlated over 0.1 s); (c) ``clock``, stamps jittered by 4 m
 of the frames dropped in bursts of 1-5; (d) ``half``, each fold trained on half its training
 recordings of every interaction. Each alone and all together. And (e) ``tempo``, the people's
 pace within each recording off by about a third over about a fifth of the movement (onset and
-end kept), alone: a stress on the linear phase that a nearest neighbour aligned by DTW does not
-feel. The model is trained as a user
+end kept), a stress on the linear phase that a nearest neighbour aligned by DTW does not feel:
+alone, with half the recordings (``tempo_half``), with (a) + (b) + (c) (``tempo_abc``), and with
+one training recording of every interaction named, the rest not (``tempo_one_label``: the
+mixture semi-supervised, ``unlabelled_ari`` on the others). The model is trained as a user
 who knows their recordings would train it: ``--translation shared`` (core.patterns) where the
 pair may stand anywhere, the default (``none``) otherwise; both where the comparison says what
 the option buys and costs. The nearest-neighbour baseline gets the same knowledge (derivative
@@ -52,7 +54,13 @@ CASES = {
     'all_none': (('offset', 'noise', 'clock'), 1.0, 'none'),
     'all_half': (('offset', 'noise', 'clock'), TRAIN_FRACTION, 'shared'),
     'tempo': (('tempo',), 1.0, 'none'),
+    'tempo_half': (('tempo',), TRAIN_FRACTION, 'none'),
+    'tempo_abc': (('offset', 'noise', 'clock', 'tempo'), 1.0, 'shared'),
+    'tempo_one_label': (('tempo',), 1.0, 'none'),
 }
+# Cases whose mixture is given the labels of this many training recordings of every
+# interaction, the rest unlabelled (EvalConfig.labelled_per_class: semi-supervised).
+LABELLED_PER_CLASS = {'tempo_one_label': 1}
 EXPECTED_K = {'v1': 6, 'v2': 4}
 
 
@@ -71,7 +79,10 @@ def summary(m, clean=None) -> dict:
            'supervised_partner_cm': r(m['supervised_partner_rms_cm_by_fraction'], 2),
            'nn_partner_cm': r(m['baseline_nn_partner_rms_cm_by_fraction'], 2),
            'speed_weights': [f['speed_weight'] for f in m['folds']],
-           'floors': [f['prior_scale'] for f in m['folds']]}
+           'floors': [f['prior_scale'] for f in m['folds']],
+           'confusion': m['recognition_confusion_by_fraction']}
+    if 'unlabelled_ari' in m:
+        out['unlabelled_ari'] = round(m['unlabelled_ari'], 3)
     if clean is not None:
         out['partner_vs_clean'] = {k: (None if v is None or clean['partner_cm'][k] is None
                                        else round(v / clean['partner_cm'][k], 3))
@@ -79,16 +90,28 @@ def summary(m, clean=None) -> dict:
     return out
 
 
-def aims(version, s) -> dict:
-    """The issue's aims for everything together (offset, noise and clock)."""
+def aims(version, s, ari=0.85, half=0.9, below_dtw=0.05, partner=1.25) -> dict:
+    """The issue's aims for a case of several corruptions together (by default offset, noise
+    and clock): K, ARI, recognition at half and against 1-NN DTW, the partner against clean
+    (``partner`` None: no aim)."""
     k = np.array(s['k'])
     gap = min(s['recognised'][f] - s['nn_dtw'][f] for f in s['recognised'])
-    return {'k_within_one': int(np.sum(np.abs(k - EXPECTED_K[version]) <= 1)),
-            'ari_at_least_0.85_and_kmeans': s['ari'] >= max(0.85, s['kmeans_ari']),
-            'recognised_half_at_least_0.9': s['recognised']['0.5'] >= 0.9,
-            'never_5_points_below_nn_dtw': gap >= -0.05,
-            'partner_half_within_1.25_clean': (s.get('partner_vs_clean') or {}).get('0.5',
-                                                                                    9) <= 1.25}
+    out = {'k_within_one': int(np.sum(np.abs(k - EXPECTED_K[version]) <= 1)),
+           f'ari_at_least_{ari:g}_and_kmeans': s['ari'] >= max(ari, s['kmeans_ari']),
+           f'recognised_half_at_least_{half:g}': s['recognised']['0.5'] >= half,
+           f'never_{100 * below_dtw:g}_points_below_nn_dtw': gap >= -below_dtw}
+    if partner is not None:
+        ratio = (s.get('partner_vs_clean') or {}).get('0.5', 9)
+        out[f'partner_half_within_{partner:g}_clean'] = ratio <= partner
+    return out
+
+
+def aims_named(s) -> dict:
+    """The issue's aims where a recording of every interaction is named: the ARI of the
+    unnamed ones, recognition within 2 points of the supervised mixture."""
+    gap = min(s['recognised'][f] - s['supervised'][f] for f in s['recognised'])
+    return {'unlabelled_ari_at_least_0.95': s['unlabelled_ari'] >= 0.95,
+            'within_2_points_of_supervised': gap >= -0.02}
 
 
 def main():
@@ -114,6 +137,7 @@ def main():
             data = corrupted(demos, which, seed=args.seed)
             groups = translation_for(mode, 3, 3)
             config = replace(base, train_fraction=share,
+                             labelled_per_class=LABELLED_PER_CLASS.get(c, 0),
                              model={**base.model, **({'translation': groups} if groups else {})})
             runs.append((v, c, data, config))
             tasks += fold_tasks(data, config, 0)
@@ -130,6 +154,11 @@ def main():
     for v in versions:
         if 'all' in out[v]:
             out[v]['aims_all'] = aims(v, out[v]['all'])
+        if 'tempo_abc' in out[v]:
+            out[v]['aims_tempo_abc'] = aims(v, out[v]['tempo_abc'], ari=0.85, half=0.85,
+                                            below_dtw=0.0, partner=None)
+        if 'tempo_one_label' in out[v]:
+            out[v]['aims_tempo_one_label'] = aims_named(out[v]['tempo_one_label'])
     out['runtime_s'] = round(time.perf_counter() - t0, 1)
     print(json.dumps(jsonable(out)))
 

@@ -94,8 +94,6 @@ EVALUATE_CSV = ['evaluate', '--csv', '{tmp}/csv', '--labels', '{tmp}/labels.json
     (TRAIN_CSV + ['--observed', 'x,y', '--time', 'x'], "--time 'x' names the time column"),
     (TRAIN_CSV + ['--observed', 'x', '--cut', 'recorded'],
      '--cut: for a folder of bags only, not --csv'),
-    (TRAIN_CSV + ['--observed', 'x', '--on-error', 'raise'],
-     '--on-error: for a folder of bags only, not --csv'),
     (TRAIN_CSV + ['--observed', 'x', '--controlled', 'q', '--components', '2', '--criterion',
                   'loo'], '--components gives K and --criterion chooses it'),
     (TRAIN_CSV + ['--observed', 'x', '--criterion', 'loo'],

@@ -744,6 +744,8 @@ def test_observer_reports_one_gap_per_silence_on_the_callers_clock():
 
 
 def test_observer_drops_bad_poses_and_takes_a_replayed_stream_as_new():
+    """Stamps going back by less than new_stream_jump_back: dropped, until
+    restart_after_backwards of them in a row make a new stream."""
     obs = _observer(restart_after_backwards=3)
     q = (0.0, 0.0, 0.0, 1.0)
     for k in range(5):
@@ -752,9 +754,11 @@ def test_observer_drops_bad_poses_and_takes_a_replayed_stream_as_new():
     assert obs.on_pose(10**9 + 9, 'world', (0, 0, 1), (0, 0, 0, 0), now_ns=1).rejected == \
         'bad_quaternion'
     assert obs.on_pose(10**9 + 4, 'world', (0, 0, 1), q, now_ns=1).rejected == 'duplicate_stamp'
-    assert [obs.on_pose(5, 'world', (0, 0, 1), q, now_ns=1).rejected,
-            obs.on_pose(6, 'world', (0, 0, 1), q, now_ns=1).rejected] == ['stamp_backwards'] * 2
-    out = obs.on_pose(7, 'world', (0, 0, 1), q, now_ns=1)      # the third: a new stream
+    back = 10**9 - 5_000_000                                  # 5 ms before the stream
+    assert [obs.on_pose(back, 'world', (0, 0, 1), q, now_ns=1).rejected,
+            obs.on_pose(back + 1, 'world', (0, 0, 1), q, now_ns=1).rejected] == \
+        ['stamp_backwards'] * 2
+    out = obs.on_pose(back + 2, 'world', (0, 0, 1), q, now_ns=1)   # the third: a new stream
     assert out.rejected is None and out.restarted and obs.counts.stream_restarts == 1
     assert {k: v for k, v in obs.counts.dropped.items() if v} == {
         'bad_quaternion': 1, 'wrong_frame': 1, 'duplicate_stamp': 1, 'stamp_backwards': 2}

@@ -7,6 +7,8 @@ import numpy as np
 
 from mixture_ip_ros.app.cli import main
 
+from test_summaries import assert_documented
+
 
 def _write_recordings(root, per_label=5, n_samples=20):
     """Two labels of two-DOF curves, each recording its own speed and amplitude: 'arc' goes up
@@ -32,9 +34,12 @@ def test_evaluate_csv_without_a_controlled_agent_measures_recognition(tmp_path, 
     out = tmp_path / 'out'
     assert main(['evaluate', '--csv', str(tmp_path / 'csv'), '--labels',
                  str(tmp_path / 'labels.json'), '--observed', 'x,y', '--out', str(out),
-                 '--quick']) == 0
+                 '--quick', '--json', str(tmp_path / 'metrics.json')]) == 0
     metrics = json.loads((out / 'metrics.json').read_text())
-    assert json.loads(capsys.readouterr().out) == metrics
+    assert json.loads((tmp_path / 'metrics.json').read_text()) == metrics
+    printed = capsys.readouterr().out
+    assert 'recognised (%) from' in printed and 'partner' not in printed
+    assert_documented(metrics)
     assert metrics['n_recordings'] == 10 and metrics['interactions'] == ['arc', 'line']
     for key in ('recognition_accuracy_by_fraction', 'baseline_nn_accuracy_by_fraction'):
         accuracy = metrics[key]

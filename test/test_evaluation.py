@@ -11,6 +11,8 @@ from mixture_ip_ros.scenarios.box_assembly import box_assembly
 from mixture_ip_ros.scenarios.folders import write_scenario_bags
 from mixture_ip_ros.app.evaluation import EvalConfig, evaluate, subsampled
 
+from test_summaries import assert_documented
+
 # Thesis 3.4.2: hand position error, mean (cm), leave-one-out.
 THESIS_HAND_ERROR_CM = {'plate': 3.2, 'screwdriver': 2.1}
 
@@ -88,6 +90,7 @@ def test_box_assembly_metrics_file_and_plots(box_from_bags):
     assert set(on_disk['rms_vs_k']) == {'1', '2', '3', '4'}
     assert len(on_disk['plots']) == 4
     assert_real_pngs(out, on_disk['plots'])
+    assert_documented(on_disk)
 
 
 def test_missing_data_em_beats_regression_and_loglik_rises(tmp_path):
@@ -105,6 +108,7 @@ def test_missing_data_em_beats_regression_and_loglik_rises(tmp_path):
     # A fifth to half of every training letter was missing (blocks of 180 samples).
     assert 0.15 < m['missing_fraction_of_training_samples'] < 0.5
     assert_real_pngs(tmp_path, m['plots'])
+    assert_documented(m)
 
 
 @pytest.mark.decision
@@ -117,6 +121,7 @@ def test_phase_estimation_finds_alpha_by_40_percent(tmp_path):
     assert rms['1'][0] < 0.2 * rms['0.1'][0]
     assert rms['0.4'][0] < rms['0.1'][0]
     assert_real_pngs(tmp_path, m['plots'])
+    assert_documented(m)
 
 
 @pytest.mark.decision
@@ -130,6 +135,7 @@ def test_pole_mixture_goes_around_the_pole(tmp_path):
     assert m['side_accuracy_mixture']['one_sided'] >= 0.85
     assert m['flange_rms_cm_mixture_one_sided'] < 0.5 * m['flange_rms_cm_single_one_sided']
     assert_real_pngs(tmp_path, m['plots'])
+    assert_documented(m)
 
 
 @pytest.mark.decision

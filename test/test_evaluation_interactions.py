@@ -8,12 +8,14 @@ import numpy as np
 import pytest
 
 from mixture_ip_ros.app.cli import main
-from mixture_ip_ros.app.evaluation.interactions import _at_contact, contact_row, stratified_folds
+from mixture_ip_ros.app.evaluation.interactions import (_at_contact, confusion, contact_row,
+                                                        stratified_folds)
 from mixture_ip_ros.core.demonstration import Layout
 from mixture_ip_ros.io.csv_files import write_csv_demonstration
 from mixture_ip_ros.scenarios.synthetic import mixture_demos
 
 from test_evaluation import assert_real_pngs
+from test_summaries import assert_documented
 
 KEYS = ('n_components_selected', 'ari', 'heldout_ari', 'recognition_accuracy_by_fraction',
         'partner_rms_cm_by_fraction', 'partner_final_cm_by_fraction', 'baseline_kmeans_ari',
@@ -55,13 +57,24 @@ def test_your_own_labelled_csv_recordings(tmp_path, capsys):
     assert main(['evaluate', '--csv', str(tmp_path / 'csv'), '--labels',
                  str(tmp_path / 'labels.json'), '--observed', 'hx,hy,hz', '--controlled',
                  'px,py,pz', '--observed-units', 'm', '--controlled-units', 'm', '--out',
-                 str(out), '--quick']) == 0
+                 str(out), '--quick', '--json', str(tmp_path / 'm.json')]) == 0
     m = json.loads((out / 'metrics.json').read_text())
-    assert json.loads(capsys.readouterr().out) == m
+    assert json.loads((tmp_path / 'm.json').read_text()) == m
+    printed = capsys.readouterr()
+    assert 'K per fold 3, 3, 3, 3, 3' in printed.out and len(printed.out.splitlines()) < 25
+    assert printed.err.count(': fold ') == 5
     assert all(k in m for k in KEYS)
+    assert_documented(m)
     assert m['n_components_selected'] == [3] * 5
     assert m['ari'] == 1.0 and m['heldout_ari'] == 1.0 and m['baseline_kmeans_ari'] == 1.0
     assert m['recognition_accuracy_by_fraction']['1'] == 1.0
+    # which interaction was recognised for which: at the end, every recording its own
+    names = [f'pattern_{k}' for k in range(3)]
+    sizes = {c: int(np.sum(labels == k)) for k, c in enumerate(names)}
+    confusion = m['recognition_confusion_by_fraction']
+    assert set(confusion) == {'0.5', '1'}
+    assert confusion['1'] == {c: {d: sizes[c] if c == d else 0 for d in names} for c in names}
+    assert {c: sum(row.values()) for c, row in confusion['0.5'].items()} == sizes
     assert set(m['partner_rms_cm_by_fraction']) == {'0.3', '0.5', '0.7', '1'}
     assert m['partner_rms_cm_by_fraction']['1'] is None           # nothing left to predict
     for f in ('0.3', '0.5', '0.7'):
@@ -150,4 +163,17 @@ def test_the_four_interactions_of_real_people_are_found_without_labels(nuisi_v2)
     assert set(by) == set(counts)
     assert np.isclose(sum(counts[c] * by[c]['0.5'] for c in counts) / 44,
                       m['recognition_accuracy_by_fraction']['0.5'])
+    # the confusion table's diagonal is that accuracy, its rows the interactions' recordings
+    half = m['recognition_confusion_by_fraction']['0.5']
+    assert {c: sum(row.values()) for c, row in half.items()} == counts
+    assert np.isclose(sum(half[c][c] for c in counts) / 44,
+                      m['recognition_accuracy_by_fraction']['0.5'])
     assert_real_pngs(out, m['plots'])
+    assert_documented(m)
+
+
+def test_the_confusion_table_counts_each_label_by_the_name_recognised():
+    truth = np.array(['a', 'a', 'b', 'b', 'b'])
+    said = np.array(['a', 'b', 'b', 'b', 'component_2'], dtype=object)
+    assert confusion(truth, said, ['a', 'b']) == {
+        'a': {'a': 1, 'b': 1, 'component_2': 0}, 'b': {'a': 0, 'b': 2, 'component_2': 1}}

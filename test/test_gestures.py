@@ -17,6 +17,7 @@ from mixture_ip_ros.scenarios.synthetic import mixture_demos
 from mixture_ip_ros.io.ucr import read_ts
 
 from test_evaluation import assert_real_pngs
+from test_summaries import assert_documented
 
 KEYS = ('n_components_selected', 'unsupervised_accuracy_by_fraction',
         'unsupervised_accuracy_phase_known_by_fraction', 'supervised_accuracy_by_fraction',
@@ -66,6 +67,7 @@ def test_gesture_evaluation_reports_every_method_on_the_same_split(quick_gesture
     assert np.sum(m['clusters_vs_labels']['counts']) == 20
     assert json.loads((out / 'metrics.json').read_text()) == m
     assert_real_pngs(out, m['plots'])
+    assert_documented(m)
 
 
 def test_ts_reader_reads_unequal_lengths_and_labels(tmp_path):

@@ -258,9 +258,10 @@ def test_train_command_on_csv_files_with_a_controlled_agent(tmp_path, capsys):
     out = tmp_path / 'm.npz'
     assert main(['train', '--csv', str(tmp_path / 'csv'), '--observed', 'x,y,z',
                  '--controlled', 'q1,q2', '--out', str(out), '--components', '3',
-                 '--n-basis', '8']) == 0
-    summary = json.loads(capsys.readouterr().out)
+                 '--n-basis', '8', '--json', str(tmp_path / 'summary.json')]) == 0
+    summary = json.loads((tmp_path / 'summary.json').read_text())
     assert summary['n_components'] == 3 and 'selection' not in summary
+    assert 'K = 3: given (--components)' in capsys.readouterr().out
     model, meta = load_model(out, controlled_names=['q1', 'q2'])
     assert meta['controlled_units'] == ['', '']
 

@@ -162,12 +162,14 @@ def test_stream_restart_after_consistent_backwards_stamps(harness):
         Parameter('restart_after_backwards', value=5), UNCLOCKED]))
     for k in range(10):
         node.on_pose(pose_msg(T0_NS + k * 10_000_000, (0, 0, 1)))
-    for k in range(4):  # replay from the start: the first few are dropped ...
-        node.on_pose(pose_msg(T0_NS - 10**9 + k * 10_000_000, (0, 0, 1)))
+    # Stamps from 20 ms on again, less than new_stream_jump_back (0.1 s) before the last one:
+    # the first few are dropped ...
+    for k in range(4):
+        node.on_pose(pose_msg(T0_NS + 20_000_000 + k * 10_000_000, (0, 0, 1)))
     assert node.drop_counts['stamp_backwards'] == 4 and node.observer.counts.stream_restarts == 0
-    node.on_pose(pose_msg(T0_NS - 10**9 + 4 * 10_000_000, (0, 0, 1)))
+    node.on_pose(pose_msg(T0_NS + 20_000_000 + 4 * 10_000_000, (0, 0, 1)))
     assert node.observer.counts.stream_restarts == 1 and node.accepted == 11   # a new stream
-    node.on_pose(pose_msg(T0_NS - 10**9 + 5 * 10_000_000, (0, 0, 1)))
+    node.on_pose(pose_msg(T0_NS + 20_000_000 + 5 * 10_000_000, (0, 0, 1)))
     assert node.accepted == 12
 
 

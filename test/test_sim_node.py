@@ -25,6 +25,7 @@ from mixture_ip_ros.robot.kinematics import RobotKinematics
 HOME = DEFAULT.home_array()
 
 RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+PROBE_COMMANDS = {'commander': '', 'command_lease': 0.0}
 
 
 def _duration(seconds):
@@ -48,7 +49,8 @@ class Sim:
     """The sim node in the harness, with a trajectory publisher and recorders of its outputs."""
 
     def __init__(self, harness, start=True, **overrides):
-        params = {'real_time_factor': 0.0, **overrides}
+        # The probe commands the arm, from the sim's own DDS participant (no liveliness).
+        params = {'real_time_factor': 0.0, **PROBE_COMMANDS, **overrides}
         self.h = harness
         self.sim_node = harness.add(SimNode(context=harness.context, parameter_overrides=[
             Parameter(k, value=v) for k, v in params.items()]), start=start)
@@ -123,7 +125,7 @@ def test_topics_resolve_in_the_namespace_and_remap_to_a_ros2_control_controller(
     controller = '/joint_trajectory_controller/joint_trajectory'
     node = harness.add(SimNode(context=harness.context, namespace='/arm', cli_args=[
         '--ros-args', '-r', f'joint_trajectory:={controller}'], parameter_overrides=[
-        Parameter('real_time_factor', value=0.0)]))
+        Parameter(k, value=v) for k, v in {'real_time_factor': 0.0, **PROBE_COMMANDS}.items()]))
     assert node.trajectory_sub.topic_name == controller
     assert node.joint_state_pub.topic_name == '/arm/joint_states'
     assert node.flange_pub.topic_name == '/arm/flange_pose'

@@ -60,9 +60,11 @@ class ClosedLoop:
                 {'delay': float(command_delay)}))
             estimator_params = {**(estimator_params or {}), 'trajectory_topic':
                                 self.relay.get_parameter('input_topic').value}
+        # One process, one DDS participant: FastDDS asserts no liveliness within it, and the
+        # loop sends the arm home itself (go_home): any publisher commands, none is watched.
         self.sim = SimNode(context=self.context, parameter_overrides=managed + _params(
             {**which, 'simulated_time': True, 'real_time_factor': float(real_time_factor),
-             **(sim_params or {})}))
+             'commander': '', 'command_lease': 0.0, **(sim_params or {})}))
         self.observer = ObserverNode(context=self.context, parameter_overrides=(
             managed + sim_time + _params({**which, **(observer_params or {})})))
         self.estimator = EstimatorNode(context=self.context, parameter_overrides=(

@@ -10,7 +10,6 @@ and the estimator's latency. ``--command-delay S`` holds every command S s of si
 its way to the arm.
 """
 
-import json
 import logging
 import os
 import sys
@@ -21,11 +20,11 @@ import numpy as np
 
 from mixture_ip_ros.io.bags import read_bag
 from mixture_ip_ros.io.dataset import load_demonstration
-from mixture_ip_ros.io.files import write_text_atomic
 from mixture_ip_ros.scenarios.folders import read_labels, read_scenario_robot, write_scenario_bags
 from mixture_ip_ros.robot.description import DEFAULT_ROBOT, load_description
 from mixture_ip_ros.robot.kinematics import RobotKinematics
 from mixture_ip_ros.app.progress import text_progress
+from mixture_ip_ros.app.summary import demo_summary, write_json
 from mixture_ip_ros.app.training import train_to_file
 
 log = logging.getLogger('mixture_ip_ros.app.demo')
@@ -121,10 +120,8 @@ def run_demo(args):
     report = make_report(records, info, latency)
     report['robot'] = robot.name
     report['command_delay'] = args.command_delay
-    print(json.dumps({k: v for k, v in report.items() if k != 'interactions'}, indent=1))
-    if args.json:
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        write_text_atomic(args.json, json.dumps(report, indent=1) + '\n')
+    write_json(args.json, report)
+    print(demo_summary(report, args.json))
     plot_demo(records, out_dir)
     print(f'plots in {out_dir}')
     if args.render:
@@ -227,18 +224,19 @@ def plot_demo(records, out_dir: Path):
         ax[0].invert_xaxis()
         ax[0].legend(fontsize=7)
         ax[1].set(xlabel='time since onset (s)', ylabel='z (m)', title='height')
-        ax[1].legend(fontsize=7)
         for k, label in enumerate(rec.component_labels):
             if len(rec.posterior):
                 ax[2].plot(rec.posterior_t - t0, rec.posterior[:, k], label=f'p({label} | D)')
         if len(rec.phase):
             ax[2].plot(rec.posterior_t - t0, rec.phase, 'k--', label='phase z')
         for a in ax[1:]:
-            for when, style in ((rec.commit_time, 'g:'), (rec.end_time, 'r:')):
+            for when, colour, what in ((rec.commit_time, 'g', 'robot committed'),
+                                       (rec.end_time, 'r', 'human movement ended')):
                 if when is not None:
-                    a.axvline(when - t0, color=style[0], ls=':')
+                    a.axvline(when - t0, color=colour, ls=':', label=what)
         ax[2].set(xlabel='time since onset (s)', ylim=(-0.05, 1.05),
                   title=f'true {rec.true_pattern}, chosen {rec.chosen_pattern}')
+        ax[1].legend(fontsize=7)
         ax[2].legend(fontsize=7)
         fig.tight_layout()
         save_figure(fig, out_dir / f'{rec.name}.png', dpi=90)

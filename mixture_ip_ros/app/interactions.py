@@ -15,7 +15,6 @@ refused trajectories, commanded points beyond the arm's limits and non-finite co
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 import time
@@ -24,13 +23,13 @@ from pathlib import Path
 import numpy as np
 
 from mixture_ip_ros.app.progress import text_progress
+from mixture_ip_ros.app.summary import demo_summary, write_json
 from mixture_ip_ros.app.training import train_to_file
 from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.core.playback import played_to
 from mixture_ip_ros.io.bags import read_bag
 from mixture_ip_ros.io.dataset import (NoRecordedInterval, load_dataset, load_demonstration,
                                        segment_recording)
-from mixture_ip_ros.io.files import write_text_atomic
 from mixture_ip_ros.robot.description import DEFAULT_ROBOT, load_description
 from mixture_ip_ros.scenarios import interactions, nuisi
 from mixture_ip_ros.scenarios.folders import read_labels, read_scenario_robot
@@ -215,11 +214,8 @@ def run(args):
           + (f' (leave-one-out RMS by K: {np.round(info["loo_rms_mean"], 4).tolist()})'
              if 'loo_rms_mean' in info else ''))
     records, report = replay(scene, model_path, info, data_dir)
-    print(json.dumps({k: v for k, v in report.items() if k not in ('interactions', 'training')},
-                     indent=1))
-    if args.json:
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        write_text_atomic(args.json, json.dumps(report, indent=1) + '\n')
+    write_json(args.json, report)
+    print(demo_summary(report, args.json))
     if args.render:
         from mixture_ip_ros.app.demo import render_all
         render_all(records, Path(args.render))

@@ -1,5 +1,6 @@
-"""Training's progress on a console: the fits of its held-out curves (:func:`text_progress`)
-and the time of each of its stages (:class:`Stages`, shown by :func:`text_stages`)."""
+"""Progress on a console: the fits of training's held-out curves (:func:`text_progress`), the
+time of each of its stages (:class:`Stages`, shown by :func:`text_stages`), and an evaluation's
+folds as each one ends (:func:`text_lines`)."""
 
 from contextlib import contextmanager
 import sys
@@ -79,5 +80,16 @@ def text_stages(stream=None):
                 stream.write(f'{name} ...\n')
         else:
             stream.write(f'{name}: {seconds:.1f} s\n')
+        stream.flush()
+    return show
+
+
+def text_lines(stream=None):
+    """``show(line)``: each line written whole on ``stream`` (default: stderr) as it comes, for
+    steps that each take long enough to be worth a line (an evaluation's folds)."""
+    stream = sys.stderr if stream is None else stream
+
+    def show(line):
+        stream.write(line + '\n')
         stream.flush()
     return show

@@ -33,9 +33,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from mixture_ip_ros.app.naming import component_labels
+from mixture_ip_ros.app.naming import named_components
 from mixture_ip_ros.app.progress import Stages
 from mixture_ip_ros.core.calibration import calibrated_speed_weight, held_out_warp_gain
+from mixture_ip_ros.core.checks import labelling, labels_fit
 from mixture_ip_ros.core.crossval import check_prepared, prepare_for_cv
 from mixture_ip_ros.core.demonstration import Layout
 from mixture_ip_ros.core.mixture import MixtureIProMP
@@ -112,8 +113,12 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
           n_jobs=None, prepared=None, **params):
     """Fit the mixture; K given, or chosen by ``criterion`` ('auto' = 'patterns', or 'loo';
     see the module docstring). ``labels`` makes a supervised fit (one component per class,
-    K = number of classes). ``params`` go to MixtureIProMP; without ``prior_scale`` among them,
-    the floor is calibrated over ``prior_scales`` on ``n_folds`` held-out folds. Returns
+    K = number of classes); with None for the demonstrations without a label, a
+    semi-supervised one (MixtureIProMP.fit: the named ones fixed to their label's component,
+    the others learned; K given or chosen among the candidates not below the number of
+    labels, the floor calibrated as without labels). ``params`` go to MixtureIProMP; without
+    ``prior_scale`` among them, the floor is calibrated over ``prior_scales`` on ``n_folds``
+    held-out folds. Returns
     (model, info dict): info['selection'] holds the curve of the criterion, the chosen K, its
     floor and whether the curve has a clear optimum (a flat curve is reported as such, never
     silently read as K = 1); info['phase'] whether the phase bends ('chosen': the warps kept
@@ -130,13 +135,21 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
     """
     demos = list(demos)
     _check_arguments(demos, criterion, n_jobs, params, prepared)
+    labels = _checked_labels(labels, demos, n_components)
     stages = Stages() if stages is None else stages
     config = ModelConfig(params)
     run = _Run(demos, labels, n_folds, n_jobs, progress, prior_scales, stages,
                Preparation(demos, config.for_folds(), prepared))
     info = _data_summary(demos, labels, params)
-    if labels is not None:
+    named = labelling(labels)
+    if named == 'all':
         n_components = len(set(labels))
+    elif named == 'some' and n_components is None:
+        names = len(set(labels) - {None})
+        candidates = [k for k in candidates if k >= names]
+        if not candidates:
+            raise ValueError(f'every candidate K is below the {names} labels (each label is a '
+                             'component of its own): allow more components')
     selection = None
     if n_components is None:
         selection = _choose_k(run, candidates, criterion, config)
@@ -144,7 +157,7 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
         info['selection'] = selection
     # The floor is calibrated on held-out regression fits; EM learns from demonstrations with
     # gaps, whose regression fits say little about it, and keeps the configured floor.
-    if not config.given('prior_scale') and labels is None and not config.em:
+    if not config.given('prior_scale') and named != 'all' and not config.em:
         floor = _choose_floor(run, n_components, criterion, selection, config)
         if floor is not None:
             config = config.settled(prior_scale=floor)
@@ -167,6 +180,9 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
                        'left out of the Gaussian over the warp: %s', len(failed),
                        ', '.join(map(str, failed)))
     info['n_components'] = int(n_components)
+    # each component's members: the demonstrations it explains best, for the reports
+    info['component_sizes'] = np.bincount(np.argmax(model.resp_, axis=1),
+                                          minlength=int(n_components)).tolist()
     info['prior_scale'] = float(model.prior_scale)
     info['speed_weight'] = float(model.speed_weight)
     info['noise_var'] = np.asarray(model.noise_var_).tolist()
@@ -190,13 +206,35 @@ def _check_arguments(demos, criterion, n_jobs, params, prepared):
         check_prepared(prepared, demos, params)
 
 
+def _checked_labels(labels, demos, n_components):
+    """``labels`` as a list, one per demonstration (None where a demonstration has none), or
+    None where none is named; ValueError where they cannot make a fit."""
+    if labels is None:
+        return None
+    labels = list(labels)
+    if len(labels) != len(demos):
+        raise ValueError(f'labels must have one entry per demonstration ({len(demos)}), got '
+                         f'{len(labels)}')
+    if labelling(labels) == 'none':
+        return None
+    names = len(set(labels) - {None})
+    if n_components is not None and not labels_fit(labels, n_components):
+        raise ValueError(f'n_components={n_components} cannot hold the {names} labels: every '
+                         'label is a component of its own (with every demonstration labelled, '
+                         'K is their number)')
+    return labels
+
+
 def _data_summary(demos, labels, params) -> dict:
     """The training summary's account of the data: how many demonstrations of how many DOFs,
     whether supervised, the DOF groups translated together."""
     info = {'n_demonstrations': len(demos), 'n_observed_dofs': demos[0].n_observed_dofs,
             'n_controlled_dofs': demos[0].n_controlled_dofs}
-    if labels is not None:
+    if labelling(labels) == 'all':
         info['supervised'] = True
+    elif labels is not None:
+        info['labelled'] = {'demonstrations': sum(lbl is not None for lbl in labels),
+                            'labels': sorted({str(lbl) for lbl in labels if lbl is not None})}
     groups = translation_groups(params.get('translation'), demos[0].n_observed_dofs
                                 + demos[0].n_controlled_dofs)
     if groups:
@@ -295,13 +333,15 @@ def default_layout(demos, robot=None) -> Layout:
 
 
 def train_to_file(demos, out_path, layout: Layout = None, observed_frame: str = None, *,
-                  robot=None, **kwargs):
+                  robot=None, extra: dict = None, **kwargs):
     """:func:`train`, calibrate its novelty test (core.novelty: the evidence of held-out
-    demonstrations, for an unsupervised model), then save the model with the layout's names
-    and units and the training summary. By default the layout is the bags' (the wrist, and
-    ``robot``'s joints: a shipped name, a description file or a RobotDescription; None: the
-    iiwa 14) and the observed agent is in the robot's base frame. A wrist in metres gets the
-    wrist's observation noise unless ``observation_noise`` is given."""
+    demonstrations), then save the model with the layout's names and units, its components'
+    names (app.naming.named_components: the labels' where ``labels`` name them) and the
+    training summary. By default the layout is the bags' (the wrist, and ``robot``'s joints: a
+    shipped name, a description file or a RobotDescription; None: the iiwa 14) and the
+    observed agent is in the robot's base frame. A wrist in metres gets the wrist's
+    observation noise unless ``observation_noise`` is given. ``extra``: more records for the
+    model file's metadata ``extra`` (app.arm_in_partner_place: the placement)."""
     demos = list(demos)
     robot = load_description(robot)
     layout = (layout or default_layout(demos, robot)).check(demos)
@@ -309,28 +349,33 @@ def train_to_file(demos, out_path, layout: Layout = None, observed_frame: str = 
         kwargs.setdefault('observation_noise', WRIST_OBSERVATION_NOISE)
     stages = kwargs.setdefault('stages', Stages())
     checked_jobs(kwargs.get('n_jobs'))
-    unsupervised = kwargs.get('labels') is None
-    if kwargs.get('prepared') is None and (unsupervised or kwargs.get('method') != 'em'):
+    if kwargs.get('prepared') is None:
         # Training's stages and the novelty folds below share it (train's ``prepared``).
         with stages('preparing'):
             kwargs['prepared'] = prepare_for_cv(demos, {**_model_params(kwargs),
                                                         'method': 'regression'})
     model, info = train(demos, **kwargs)
-    if unsupervised:
-        # Held-out folds fitted by regression, as the K curves: EM fits would be far slower.
-        params = {**_model_params(kwargs), 'method': 'regression',
-                  'prior_scale': model.prior_scale}      # the floor chosen with K
-        with stages('novelty'):
-            model.novelty_ = calibrate_novelty(
-                demos, lambda index: MixtureIProMP(n_components=model.n_components,
-                                                   **params).fit(kwargs['prepared'].take(index)),
-                n_jobs=kwargs.get('n_jobs'))
-        info['novelty'] = {'prefix': model.novelty_.prefix.round(3).tolist(),
-                           'window': round(model.novelty_.window, 3)}
+    # Held-out folds fitted by regression, as the K curves: EM fits would be far slower.
+    params = {**_model_params(kwargs), 'method': 'regression',
+              'prior_scale': model.prior_scale}      # the floor chosen with K
+    labels = kwargs.get('labels')
+
+    def fold_model(index):
+        # Each fold with its own labels where they can name the model's components (a fold
+        # may miss a label every one of whose demonstrations it holds out), else without.
+        fold_labels = None if labels is None else [labels[i] for i in index]
+        if not labels_fit(fold_labels, model.n_components):
+            fold_labels = None
+        return MixtureIProMP(n_components=model.n_components, **params).fit(
+            kwargs['prepared'].take(index), labels=fold_labels)
+    with stages('novelty'):
+        model.novelty_ = calibrate_novelty(demos, fold_model, n_jobs=kwargs.get('n_jobs'))
+    info['novelty'] = {'prefix': model.novelty_.prefix.round(3).tolist(),
+                       'window': round(model.novelty_.window, 3)}
     with stages('saving'):
         save_model(Path(out_path), model, layout=layout,
                    observed_frame=robot.base_frame if observed_frame is None else observed_frame,
-                   component_labels=component_labels(model, demos),
-                   extra={'training': info, 'robot': robot.name})
+                   component_labels=named_components(model, demos),
+                   extra={**(extra or {}), 'training': info, 'robot': robot.name})
     info['seconds'] = dict(stages.seconds)
     return model, info

@@ -10,6 +10,7 @@ scored on folds held out of the model (:func:`held_out_scores`):
 
 import numpy as np
 
+from .checks import labels_fit
 from .crossval import fold_scores, k_folds
 from .mixture import MixtureIProMP
 from .numerics import first_best
@@ -49,11 +50,11 @@ def held_out_scores(demos, data, n_components, labels, n_folds, params, score, n
     model a ``MixtureIProMP(n_components, **params)`` fit of the other folds of ``data``
     (core.crossval.prepare_for_cv of ``demos``) with their ``labels`` (None: unsupervised), on
     ``n_jobs`` threads, in the folds' order; folds that cannot hold the model (too few
-    demonstrations, or not every label) are left out."""
+    demonstrations, or labels that cannot name its components: core.checks.labels_fit) are
+    left out."""
     def fit(fold, _):
         fit_labels = None if labels is None else [labels[i] for i in fold.train]
-        if len(fold.train) < n_components or (fit_labels is not None
-                                              and len(set(fit_labels)) != n_components):
+        if len(fold.train) < n_components or not labels_fit(fit_labels, n_components):
             return None
         return MixtureIProMP(n_components=n_components, **params).fit(
             data.take(fold.train), labels=fit_labels)

@@ -1,5 +1,6 @@
-"""Checks of a mixture's inputs: the demonstrations it is fitted to, a supervised fit's labels
-and an observation it is conditioned on. Each raises ValueError naming what is wrong."""
+"""Checks of a mixture's inputs: the demonstrations it is fitted to, the labels of a fit in which
+all or some of them are named, and an observation it is conditioned on. Each raises ValueError
+naming what is wrong."""
 
 import numpy as np
 
@@ -18,6 +19,43 @@ def label_indices(labels, n, n_components):
         raise ValueError(f'a supervised fit has one component per class: n_components='
                          f'{n_components} but the labels name {len(classes)} classes')
     return [c.item() if hasattr(c, 'item') else c for c in classes], index
+
+
+def named_indices(labels, n, n_components):
+    """(sorted distinct names, index of each demonstration's name or -1 where it has none
+    (n,)) for a fit in which some demonstrations are named and the rest (None) are not, with
+    ``n_components`` >= the number of names."""
+    labels = list(labels) if labels is not None else None
+    if labels is None or len(labels) != n:
+        raise ValueError(f'labels must have one entry per demonstration ({n}), got '
+                         f'{None if labels is None else len(labels)}')
+    named = [i for i, lbl in enumerate(labels) if lbl is not None]
+    classes, index = np.unique(np.asarray([labels[i] for i in named]), return_inverse=True)
+    if len(classes) > n_components:
+        raise ValueError(f'the labels name {len(classes)} classes, more than n_components='
+                         f'{n_components}: each name is a component of its own')
+    out = np.full(n, -1)
+    out[named] = index.ravel()
+    return [c.item() if hasattr(c, 'item') else c for c in classes], out
+
+
+def labelling(labels) -> str:
+    """How ``labels`` (one entry per demonstration, None for one without a name) name the
+    demonstrations: 'none' (no labels, or every entry None), 'all' or 'some'."""
+    if labels is None:
+        return 'none'
+    missing = sum(lbl is None for lbl in labels)
+    return 'none' if missing == len(labels) else 'all' if missing == 0 else 'some'
+
+
+def labels_fit(labels, n_components) -> bool:
+    """Whether a fit of ``n_components`` can take ``labels`` (None: no labels): every
+    demonstration named, one component per name; some named, at most one name per component;
+    none named (or no labels), any."""
+    named = labelling(labels)
+    names = len({lbl for lbl in labels if lbl is not None}) if named != 'none' else 0
+    return (named == 'none' or (named == 'all' and names == n_components)
+            or (named == 'some' and names <= n_components))
 
 
 def checked_demonstrations(demonstrations) -> list:

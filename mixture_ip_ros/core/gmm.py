@@ -114,11 +114,11 @@ def noise_m_step(sq, m, resp, tied: bool = True):
     out = np.where(den > 1e-9, num / np.maximum(den, 1e-9), tied)
     return np.maximum(out, 1e-10)
 
-def latent_e_step(stats, weights, means, covs, noise, lp_alpha, fixed_resp=None):
+def latent_e_step(stats, weights, means, covs, noise, lp_alpha, fixed=None):
     """E step with latent weights: eqs. 27-28 per (demonstration, component) and eq. 7 with
-    each demonstration's marginal likelihood (eq. 21); ``fixed_resp`` keeps the
-    responsibilities of a supervised fit (the returned log-likelihood is then the
-    complete-data one given the labels)."""
+    each demonstration's marginal likelihood (eq. 21). ``fixed`` (responsibilities (n, K),
+    rows (n,) bool) keeps those rows' responsibilities (named demonstrations'); the returned
+    log-likelihood is then the complete-data one for them, the marginal one for the others."""
     n, K, d = len(stats), len(weights), means.shape[1]
     post_means = np.empty((n, K, d))
     post_covs = np.empty((n, K, d, d))
@@ -129,7 +129,13 @@ def latent_e_step(stats, weights, means, covs, noise, lp_alpha, fixed_resp=None)
         for i, st in enumerate(stats):
             post_means[i, k], post_covs[i, k], ll = weight_posterior(st, means[k], chol, nk)
             lp[i, k] = np.log(weights[k]) + ll + lp_alpha[i, k]
-    if fixed_resp is not None:
-        return fixed_resp, float(np.sum(fixed_resp * lp)), post_means, post_covs
+    if fixed is not None:
+        fixed_resp, rows = fixed
+        free = ~rows
+        norm = logsumexp_rows(lp[free])
+        resp = fixed_resp.copy()
+        resp[free] = np.exp(lp[free] - norm[:, None])
+        return (resp, float(np.sum(fixed_resp[rows] * lp[rows]) + norm.sum()), post_means,
+                post_covs)
     norm = logsumexp_rows(lp)
     return np.exp(lp - norm[:, None]), float(norm.sum()), post_means, post_covs

@@ -5,7 +5,9 @@ steps (``_initialize``, ``_e_step``, ``_m_step``) whose maths are core.gmm's pur
 how many components and how much covariance floor is core.selection's. What the fitted
 mixture says with the phase known (component posterior, eqs. 11-12, and conditioning of the
 most probable component, eq. 13) is its base core.inference.PhaseKnownInference; each
-component's phase warp is core.warped's.
+component's phase warp is core.warped's. Labels for every demonstration, or for some (None for
+the others), fix the named ones' responsibilities: the supervised mixture, or semi-supervised EM
+from the patterns found with the names held (core.named).
 
 ``method='em'`` learns the mixture from partially observed demonstrations (chapter 5 future
 work): the weights of every demonstration are latent as in 4.2.1, so E-step responsibilities
@@ -19,10 +21,11 @@ import numpy as np
 from scipy import linalg
 
 from .basis import GaussianBasis
-from .checks import checked_demonstrations, label_indices
+from .checks import checked_demonstrations, label_indices, labelling, named_indices
 from .gmm import (_gmm_log_prob, covariance_penalty_of_m_step, covariance_prior,
                   gmm_maximization, latent_e_step, noise_m_step)
 from .inference import PhaseKnownInference
+from .named import named_patterns
 from .numerics import logsumexp_rows
 from .noise import MAX_LAG_S, correlation_time, residual_autocovariance
 from .patterns import PatternMixture, PatternSpace, offset_operators, translation_groups
@@ -85,8 +88,9 @@ class MixtureIProMP(PhaseKnownInference):
     DOF's residuals stay correlated (s, core.noise) and ``sample_period_`` the recordings'
     sample period (s), which together say what one observation is worth online
     (:meth:`observed_noise_var_at`), ``log_likelihood_`` per EM iteration
-    (penalised, monotone), ``resp_`` (n, K), ``classes_`` (the labels of a supervised fit, else
-    None), ``warps_`` the phase warps (core.warped.PhaseWarps; None: the linear phase).
+    (penalised, monotone), ``resp_`` (n, K), ``classes_`` (the name of each component where
+    labels were given, None for a component no label names; else None), ``warps_`` the phase
+    warps (core.warped.PhaseWarps; None: the linear phase).
 
     ``prior_strength`` pseudo-samples of a shared covariance ``prior_cov_`` regularise every
     component covariance (conjugate prior, so EM stays monotone in the penalised likelihood):
@@ -158,7 +162,12 @@ class MixtureIProMP(PhaseKnownInference):
         ``labels`` (n,), optional: a supervised fit with one component per distinct label
         (sorted; ``n_components`` must equal their number) and the responsibilities fixed to
         the labels, i.e. one Interaction ProMP per class sharing the noise model and the
-        covariance prior. ``classes_`` then names the components.
+        covariance prior. ``classes_`` then names the components. With None for the
+        demonstrations that have no label, semi-supervised EM: one component per distinct
+        label (sorted, the first ones; ``n_components`` at least their number), a named
+        demonstration's responsibilities fixed to its label's, the others' learned, from
+        :meth:`named_start` (or ``init``, the names overriding it); ``classes_`` names the
+        components, None for the components no label names. Every label None is no label.
         """
         self._check_params()
         data = (demonstrations if isinstance(demonstrations, Prepared)
@@ -171,13 +180,13 @@ class MixtureIProMP(PhaseKnownInference):
             T, B = offset_operators(self.n_basis, data.sq.shape[1], self.translation)
             offsets = data.W @ T.T
             data = data._replace(W=data.W - offsets @ B.T)
-        resp, fixed_noise = self._initialize(data, labels, init)
+        resp, fixed_noise, fixed = self._initialize(data, labels, init)
         params = self._m_step(data, resp, data.W, None, fixed_noise)
         self.log_likelihood_ = []
         self.converged_ = False
         previous = -np.inf
         for it in range(self.max_iter):
-            new_resp, ll, post_means, post_covs = self._e_step(data, params, resp, labels)
+            new_resp, ll, post_means, post_covs = self._e_step(data, params, resp, fixed)
             self.log_likelihood_.append(ll)
             if ll - previous < self.tol * max(1.0, abs(ll)):
                 self.converged_ = True
@@ -259,17 +268,35 @@ class MixtureIProMP(PhaseKnownInference):
         """EM's start (eq. 7's r_ik): the demonstrations' patterns, found in the metric of their
         paths (core.patterns: a mixture in a few principal components of the path
         coordinates), each demonstration in its most probable one."""
+        return np.argmax(self._pattern_mixture(self._pattern_coordinates(data)).resp_, axis=1)
+
+    def _pattern_coordinates(self, data: Prepared):
         space = PatternSpace(self.n_basis, data.n_observed, min_components=self.n_components - 1,
                              translation=self.translation)
-        X = space.fit(data.W).transform(data.W)
-        mixture = PatternMixture(self.n_components, self.prior_strength, n_init=self.n_init,
-                                 random_state=self.random_state).fit(X)
-        return np.argmax(mixture.resp_, axis=1)
+        return space.fit(data.W).transform(data.W)
+
+    def _pattern_mixture(self, X, resp=None, fixed=None):
+        return PatternMixture(self.n_components, self.prior_strength, n_init=self.n_init,
+                              random_state=self.random_state).fit(X, resp, fixed)
+
+    def named_start(self, data: Prepared, index, n_names: int):
+        """EM's start where some demonstrations are named (``index`` (n,): each one's name
+        0..n_names-1, -1 where it has none): the patterns found as :meth:`initial_clusters`
+        finds them, with the named demonstrations held in their names' patterns
+        (core.named.named_patterns); without a name, :meth:`initial_clusters`."""
+        X = self._pattern_coordinates(data)
+        clusters = np.argmax(self._pattern_mixture(X).resp_, axis=1)
+        if n_names == 0:
+            return clusters
+        return named_patterns(X, clusters, index, n_names, self.n_components,
+                              lambda resp, fixed: self._pattern_mixture(X, resp, fixed))
 
     def _initialize(self, data: Prepared, labels, init):
         """The fitted attributes known before EM, the starting responsibilities (labels, the
-        given ``init`` or :meth:`initial_clusters`) and the covariance priors they define;
-        returns (responsibilities (n, K), the fixed noise variances or None)."""
+        given ``init`` or :meth:`initial_clusters`; with some demonstrations named,
+        :meth:`named_start`) and the covariance priors they define; returns (responsibilities
+        (n, K), the fixed noise variances or None, which demonstrations' responsibilities
+        stay as they start (n,) bool, or None for none)."""
         n, K = len(data.W), self.n_components
         self.basis_ = GaussianBasis(self.n_basis)
         self.n_observed_ = data.n_observed
@@ -281,11 +308,21 @@ class MixtureIProMP(PhaseKnownInference):
             if not np.all(np.isfinite(fixed_noise) & (fixed_noise > 0)):
                 raise ValueError(f'noise_var must be positive and finite, got {self.noise_var!r}')
         alphas = data.alphas
+        fixed = None
         if labels is None:
             self.classes_ = None
             init = self.initial_clusters(data) if init is None else np.asarray(init)
-        else:
+        elif labelling(labels) == 'all':
             self.classes_, init = label_indices(labels, n, K)
+            fixed = np.ones(n, dtype=bool)
+        else:
+            # Some named, or none: one EM for both, which is the unlabelled fit where no
+            # demonstration is named and the supervised one where every one is.
+            names, index = named_indices(labels, n, K)
+            self.classes_ = names + [None] * (K - len(names)) if names else None
+            fixed = index >= 0
+            init = (self.named_start(data, index, len(names)) if init is None
+                    else np.where(fixed, index, np.asarray(init)))
         # A component is a joint p(w, alpha | k) = p(w | k) p(alpha | k) over shape and phase
         # speed alpha = 1/T (eq. 17's independence of w and alpha within a pattern): patterns
         # that differ in speed are told apart by it, and p(alpha | k) is the online prior.
@@ -304,7 +341,7 @@ class MixtureIProMP(PhaseKnownInference):
             st = data.stats
             self._stats = [ObservationStats(st.G[i], st.b[i], st.yy[i], st.m[i])
                            for i in range(n)]
-        return np.eye(K)[init], fixed_noise
+        return np.eye(K)[init], fixed_noise, fixed
 
     def _m_step(self, data: Prepared, resp, post_means, post_covs, fixed_noise,
                 previous: EMParams = None) -> EMParams:
@@ -330,29 +367,35 @@ class MixtureIProMP(PhaseKnownInference):
             noise = noise_m_step(sq_k, data.stats.m, resp, self.noise == 'tied')
         return EMParams(weights, means, covs, a_mean, a_var, nk, noise)
 
-    def _e_step(self, data: Prepared, params: EMParams, resp, labels):
+    def _e_step(self, data: Prepared, params: EMParams, resp, fixed):
         """Eq. 7 (with each demonstration's marginal likelihood under 'em', eq. 21): the new
-        responsibilities (the labels' under a supervised fit), the penalised log-likelihood
-        and the weights' posterior means and covariances (the point weights under
-        'regression')."""
+        responsibilities (a named demonstration's, ``fixed``, stay its name's), the penalised
+        log-likelihood and the weights' posterior means and covariances (the point weights
+        under 'regression'). With some demonstrations named the likelihood is that of EM with
+        their components observed: log p(w_i, k_i) for a named one, log p(w_i) for the others,
+        which EM's steps never decrease, as without names."""
         lp_alpha = alpha_log_density(data.alphas, params.alpha_mean, params.alpha_var)
         chols = [linalg.cho_factor(c, lower=True, check_finite=False) for c in params.covs]
         new_resp = resp
         if self.method == 'regression':
             lp, maha = _gmm_log_prob(data.W, params.weights, params.means, chols)
             lp += lp_alpha                                                         # eq. 7
-            if labels is None:
+            if fixed is None:
                 norm = logsumexp_rows(lp)
                 new_resp, ll = np.exp(lp - norm[:, None]), float(norm.sum())
             else:
-                ll = float(np.sum(resp * lp))
+                free = ~fixed
+                norm = logsumexp_rows(lp[free])
+                new_resp = resp.copy()
+                new_resp[free] = np.exp(lp[free] - norm[:, None])
+                ll = float(np.sum(resp[fixed] * lp[fixed]) + norm.sum())
             post_means, post_covs = data.W, None
             ll += covariance_penalty_of_m_step(chols, resp, maha, data.W.shape[1],
                                                 self.prior_strength)
         else:
             new_resp, ll, post_means, post_covs = latent_e_step(
                 self._stats, params.weights, params.means, params.covs, params.noise,
-                lp_alpha, resp if labels is not None else None)
+                lp_alpha, fixed=None if fixed is None else (resp, fixed))
             ll += sum(covariance_penalty(c, self.prior_cov_, self.prior_strength)
                       for c in chols)
         ll += alpha_penalty(params.alpha_var, self.alpha_prior_var_, self.prior_strength)

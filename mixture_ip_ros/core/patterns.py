@@ -269,15 +269,18 @@ class PatternMixture:
                 ('n_components', 'prior_strength', 'floor', 'n_init', 'random_state',
                  'max_iter', 'tol', 'min_members', 'dof')}
 
-    def fit(self, X, resp=None) -> 'PatternMixture':
+    def fit(self, X, resp=None, fixed=None) -> 'PatternMixture':
+        """``fixed`` (n,) bool, with ``resp``: the rows whose responsibilities stay as they
+        start (named demonstrations: semi-supervised EM, whose log-likelihood is the
+        complete-data one for those rows, the marginal one for the others)."""
         fitted = self.fit_many(np.asarray(X, dtype=float)[None],
-                               None if resp is None else [resp])[0]
+                               None if resp is None else [resp], fixed)[0]
         self.__dict__.update(fitted.__dict__)
         return self
 
-    def fit_many(self, Xs, resps=None) -> list:
+    def fit_many(self, Xs, resps=None, fixed=None) -> list:
         """One fitted copy of this mixture for each data set in ``Xs`` ((m, n, q) or a list of
-        m (n, q) arrays), each as ``fit(Xs[j], resps[j])`` would fit it."""
+        m (n, q) arrays), each as ``fit(Xs[j], resps[j], fixed)`` would fit it."""
         Xs = np.asarray(Xs, dtype=float)
         if Xs.ndim != 3 or not np.all(np.isfinite(Xs)):
             raise ValueError(f'X must be a finite (n, q) array, got shape {Xs.shape[1:]}')
@@ -289,6 +292,8 @@ class PatternMixture:
             raise ValueError(f'min_members must be a positive integer, got {self.min_members!r}')
         if not self.dof > 0:
             raise ValueError(f'dof must be positive (inf: normal), got {self.dof!r}')
+        if fixed is not None and (resps is None or np.shape(fixed) != (n,)):
+            raise ValueError('fixed rows need starting responsibilities and one flag per row')
         floors = self.floor * np.maximum(Xs.var(axis=1), 1e-300)            # (m, q)
         if resps is not None:
             starts = [[np.asarray(r, dtype=float)] for r in resps]
@@ -298,7 +303,8 @@ class PatternMixture:
             seeds = np.random.default_rng(self.random_state).integers(2 ** 31, size=self.n_init)
             starts = [list(np.eye(K)[kmeans_runs(X, K, seeds)]) for X in Xs]
         owner = np.repeat(np.arange(m), [len(s) for s in starts])
-        runs = self._ecm(Xs[owner], np.stack([R for s in starts for R in s]), floors[owner])
+        runs = self._ecm(Xs[owner], np.stack([R for s in starts for R in s]), floors[owner],
+                         None if fixed is None else np.asarray(fixed, dtype=bool))
         enough = min(int(self.min_members), n // K)
         out = []
         for j in range(m):
@@ -338,14 +344,16 @@ class PatternMixture:
         covs[..., np.arange(q), np.arange(q)] += floors[:, None, :]
         return nk / n, means, 0.5 * (covs + covs.swapaxes(-1, -2))
 
-    def _ecm(self, X, R, floors):
+    def _ecm(self, X, R, floors, fixed=None):
         """ECM from B starts side by side (X (B, n, q), starting responsibilities R (B, n, K),
-        floors (B, q)), each run stopping on its own. Returns the best iteration of each run
-        as arrays over B: (log-likelihood, weights, means, scales, the responsibilities
-        those parameters were estimated from, iteration)."""
+        floors (B, q)), each run stopping on its own; the rows in ``fixed`` (n,) keep their
+        starting responsibilities. Returns the best iteration of each run as arrays over B:
+        (log-likelihood, weights, means, scales, the responsibilities those parameters were
+        estimated from, iteration)."""
         B, n, q = X.shape
         K = R.shape[2]
         R = R.copy()
+        start = None if fixed is None else R.copy()
         # The t's weights u_ik; all 1 for the first M-step (responsibilities alone) and for
         # normal components throughout.
         U = np.ones_like(R)
@@ -359,12 +367,16 @@ class PatternMixture:
             log_f, dist = _log_densities(X[active], means, np.linalg.cholesky(covs), self.dof)
             lp = np.log(weights)[:, None, :] + log_f
             norm = _logsumexp_last(lp)
+            if fixed is not None:
+                norm[:, fixed] = np.sum(start[active][:, fixed] * lp[:, fixed], axis=2)
             ll = norm.sum(axis=1)
             better = (ll > best[0][active]) | (it == 1)
             for stored, value in zip(best, (ll, weights, means, covs, Ra,
                                             np.full(len(active), it))):
                 stored[active[better]] = value[better]
             R[active] = np.exp(lp - norm[..., None])
+            if fixed is not None:
+                R[np.ix_(active, fixed)] = start[np.ix_(active, fixed)]
             if not np.isinf(self.dof):
                 U[active] = (self.dof + q) / (self.dof + dist)
             going = ll - prev[active] > self.tol * np.maximum(1.0, np.abs(ll))

@@ -7,12 +7,27 @@ otherwise take over the stream's time), its stamps increase, and it is a person'
 (estimation.pose_check.MotionPlausibility: in the workspace, moving and accelerating as a hand
 can). Every used pose is forwarded as it comes, before the events it settles
 (core.segmentation). The segmenter runs on the stamps' time (seconds since the first accepted
-pose); silences are judged on the caller's clock, since mocap and node clocks may be offset. A
-stream whose stamps keep going back (``restart_after_backwards`` in a row: a bag replayed again,
-a mocap clock reset) is a new stream.
+pose); silences are judged on the caller's clock, since mocap and node clocks may be offset.
+
+A new stream (a bag replayed again or looping, a mocap clock reset) starts the observer afresh:
+the interaction in progress ends at its last sample, and the segmentation, the motion checks and
+the stream's time start again with the new stream's first pose, so that its onset is found as
+the first one was and never dated into the old stream. A stream is new when
+
+- its stamps jump back by more than ``new_stream_jump_back`` s at once (a replay with its
+  recorded stamps; under simulated time the replayed /clock jumps back with them). When the
+  clock is judged, the jump must agree with it: the pose is as near the clock as the old
+  stream's last one was when it came, else it is a stray older pose and is dropped;
+- its stamps keep going back by less (``restart_after_backwards`` in a row);
+- at rest, it jumps to a place no hand reaches from the last accepted pose and stays there,
+  ``new_stream_samples`` poses in a row that a hand could make (a looping replay whose stamps
+  continue): held back meanwhile, they are the new stream's first poses. A jump that returns is
+  a tracker's glitch, dropped as implausible. During a movement a jump is always taken for a
+  glitch: the movement goes on.
 """
 
 from dataclasses import dataclass, field
+import math
 from typing import List, Optional, Tuple
 
 from mixture_ip_ros.core.frames import FrameTransform
@@ -32,8 +47,13 @@ class ObservedPose:
     rejected: Optional[str] = None
     point: Optional[Tuple[float, float, float]] = None
     events: List[Tuple[str, int]] = field(default_factory=list)
-    restarted: bool = False
+    restarted: Optional[str] = None   # why this pose starts a new stream
     warning: Optional[str] = None     # once per episode of a stream on another clock
+    held: bool = False                # held back: it may start a new stream (released later)
+    # A new stream: the old stream's events it settles (published before anything of the new
+    # one), then the poses held back for it (stamp ns, point), published before ``point``.
+    ended: List[Tuple[str, int]] = field(default_factory=list)
+    released: List[Tuple[int, Tuple[float, float, float]]] = field(default_factory=list)
 
 
 @dataclass
@@ -54,13 +74,23 @@ class WristObserver:
     def __init__(self, segmenter: MotionSegmenter, transform: FrameTransform = None, *,
                  expected_frame: str = '', quaternion_tolerance: float = 0.01,
                  restart_after_backwards: int = 50, max_clock_offset: float = 1.0,
-                 limits: HumanLimits = HumanLimits()):
+                 limits: HumanLimits = HumanLimits(), new_stream_jump_back: float = 0.1,
+                 new_stream_samples: int = 3):
         if not quaternion_tolerance >= 0:
             raise ValueError(f'quaternion_tolerance must be >= 0, got {quaternion_tolerance}')
         if not max_clock_offset >= 0:
             raise ValueError(f'max_clock_offset must be >= 0 s, got {max_clock_offset}')
+        if not (new_stream_jump_back > 0 and math.isfinite(new_stream_jump_back)):
+            raise ValueError(f'new_stream_jump_back must be > 0 s, got {new_stream_jump_back}')
+        if int(new_stream_samples) != new_stream_samples or new_stream_samples < 0:
+            raise ValueError(f'new_stream_samples must be a whole number >= 0, got '
+                             f'{new_stream_samples}')
         self.max_clock_offset_ns = round(max_clock_offset * 1e9)
+        self.jump_back_ns = round(new_stream_jump_back * 1e9)
+        self.new_stream_samples = int(new_stream_samples)
         self.plausibility = MotionPlausibility(limits)
+        self._jumped = MotionPlausibility(limits)    # judges the poses of a jump among themselves
+        self._run = []                # (stamp ns, point, now ns) held back after a jump at rest
         self.clock_offset = None      # s, stamp minus clock of the latest pose off the clock
         self._off_clock = 0
         self.period = None            # s, the stream's sample period (estimated)
@@ -83,7 +113,8 @@ class WristObserver:
     def on_pose(self, stamp_ns: int, frame_id: str, position, orientation_xyzw,
                 now_ns: int) -> ObservedPose:
         """One pose (position and unit quaternion (x, y, z, w) in the mocap frame)."""
-        reason = check_pose(stamp_ns, frame_id, position, orientation_xyzw, self._last_stamp_ns,
+        last_ns = self._run[-1][0] if self._run else self._last_stamp_ns
+        reason = check_pose(stamp_ns, frame_id, position, orientation_xyzw, last_ns,
                             self.expected_frame, self.quaternion_tolerance)
         if reason in (None, 'duplicate_stamp', 'stamp_backwards') and self._off(stamp_ns, now_ns):
             out = self.drop('off_clock')
@@ -94,31 +125,102 @@ class WristObserver:
                                'motion capture on another clock (use_sim_time, time sync)? '
                                'They are dropped.')
             return out
-        restarted_events = None
-        if reason == 'stamp_backwards' and self._restarted():
-            restarted_events = self._restart()
-            reason = None
+        ended, why = [], None
+        if reason == 'stamp_backwards':
+            why = self._new_stream_in_time(stamp_ns, now_ns)
+            if why is not None:
+                ended = self._restart()
+                reason = None
         if reason is not None:
             return self.drop(reason)
         point = self.transform.apply(*position)
         t = (stamp_ns - (stamp_ns if self._t_ref_ns is None else self._t_ref_ns)) * 1e-9
+        if self._run:
+            out = self._continue_jump(stamp_ns, t, point, now_ns)
+            if out is not None:
+                return out
         reason = self.plausibility.check(t, point)
+        if reason == 'implausible_speed' and self.new_stream_samples > 0 and not self.moving:
+            return self._start_jump(stamp_ns, t, point, now_ns)
         if reason is not None:
             return self.drop(reason)
+        events = self._accept(stamp_ns, t, point, now_ns)
+        return ObservedPose(point=point, events=events, restarted=why, ended=ended)
+
+    def _accept(self, stamp_ns: int, t: float, point, now_ns: int) -> List[Tuple[str, int]]:
+        """Take a pose that passed every check (``t``: s since the stream's first pose); the
+        events it settles."""
         self.plausibility.accept(t, point)
         self._count_missing(stamp_ns)
         self._backwards = self._off_clock = 0
         if self._t_ref_ns is None:
             self._t_ref_ns = stamp_ns
         self._last_stamp_ns = stamp_ns
+        self._last_point = point
         # Zero: simulated time whose /clock has not started yet; no basis to judge silences on.
         self._last_arrival_ns = now_ns if now_ns > 0 else None
         self.counts.accepted += 1
         self.counts.published['observations'] += 1
-        events = self._settle(self.segmenter.update(t, point))
-        if restarted_events is not None:
-            events = restarted_events + events
-        return ObservedPose(point=point, events=events, restarted=restarted_events is not None)
+        return self._settle(self.segmenter.update(t, point))
+
+    # -- new streams ------------------------------------------------------------------------
+    def _new_stream_in_time(self, stamp_ns: int, now_ns: int) -> Optional[str]:
+        """Why a pose older than the last accepted one starts a new stream (None: it does not,
+        and is dropped)."""
+        back = self._last_stamp_ns - stamp_ns
+        if back > self.jump_back_ns:
+            clock_judged = (self.max_clock_offset_ns > 0 and now_ns > 0
+                            and self._last_arrival_ns is not None)
+            # With a clock, the pose must be as near it as the old stream's last pose was when
+            # it came: the clock jumped back with the stamps.
+            if not clock_judged or abs((stamp_ns - now_ns) - (
+                    self._last_stamp_ns - self._last_arrival_ns)) <= self.jump_back_ns:
+                return f'the stamps jumped back {back * 1e-9:.3g} s'
+        if self._restarted():
+            return (f'{self.restart_after} consecutive poses older than the last accepted '
+                    'one')
+        return None
+
+    def _start_jump(self, stamp_ns, t, point, now_ns) -> ObservedPose:
+        """At rest, a pose no hand reaches from the last accepted one: held back as the first of
+        a possible new stream."""
+        self._drop_run()
+        self._jumped.reset()
+        self._jumped.accept(t, point)
+        self._run = [(stamp_ns, point, now_ns)]
+        return self._held_or_new_stream()
+
+    def _continue_jump(self, stamp_ns, t, point, now_ns) -> Optional[ObservedPose]:
+        """A pose after held-back ones: one more of them if it follows them as a hand moves
+        (a new stream once there are enough); else they were a glitch, dropped, and None: the
+        pose is judged against the stream as any other."""
+        if self._jumped.check(t, point) is None:
+            self._jumped.accept(t, point)
+            self._run.append((stamp_ns, point, now_ns))
+            return self._held_or_new_stream()
+        self._drop_run()
+        return None
+
+    def _held_or_new_stream(self) -> ObservedPose:
+        if len(self._run) < self.new_stream_samples:
+            return ObservedPose(held=True)
+        run, self._run = self._run, []
+        first_ns, first, _ = run[0]
+        jump = math.dist(first, self._last_point)
+        why = (f'at rest, the wrist jumped {jump:.3g} m in '
+               f'{(first_ns - self._last_stamp_ns) * 1e-9:.3g} s and stayed there')
+        ended = self._restart()
+        events = []
+        for ns, p, now in run:
+            events += self._accept(ns, (ns - (ns if self._t_ref_ns is None else
+                                              self._t_ref_ns)) * 1e-9, p, now)
+        return ObservedPose(point=run[-1][1], events=events, restarted=why, ended=ended,
+                            released=[(ns, p) for ns, p, _ in run[:-1]])
+
+    def _drop_run(self) -> None:
+        for _ in self._run:
+            self.counts.dropped['implausible_speed'] += 1
+        self._run = []
 
     def _count_missing(self, stamp_ns: int) -> None:
         """Track the sample period (it adapts slowly; longer steps do not move it) and count the
@@ -167,6 +269,7 @@ class WristObserver:
 
     def _restart(self) -> List[Tuple[str, int]]:
         """Forget the old stream; an interaction in progress ends at its last sample."""
+        self._drop_run()
         events = []
         last_t = self.segmenter.last_time
         if self.moving and last_t is not None:

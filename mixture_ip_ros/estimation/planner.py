@@ -21,6 +21,10 @@ with at least ``min_observations`` observations used and, given calibrated novel
 changes (the controller blends from its current state into the new plan), until the movement
 stops being explained: then the robot holds and the interaction ends ('unexplained').
 
+Stale inputs (estimation.stale_inputs): no plan from an arm state older than
+``max_joint_state_age``; an interaction without wrist observations for ``max_wrist_silence``
+ends ('wrist_silent'). Each spell is counted once, its Step carrying one ``notice`` to log.
+
 Hedging (``hedge``): when only the confidence is missing, the plan with the component
 marginalised too is sent (every likely interaction's expected path weighted by p(k | D), the
 best prediction under squared error while the interaction is uncertain), so the robot is under
@@ -29,6 +33,11 @@ meet 1.5 s after its onset in NuiSI v2) the arm could not arrive in time from re
 commitment. Hedged plans are not a commit: they stop with a hold like committed ones when the
 movement is unexplained, and at the end of an interaction never committed no final plan is
 sent (the arm stays on the last one's final posture).
+
+A replay stopped or restarted ends the interaction without an error (estimation.stream_clock):
+an 'end' that comes when the clock has gone on past observations that came on it, or back
+before them, sends no plan ('stream_stopped'), and a clock that jumps back ends the interaction
+in progress ('clock_reset').
 """
 
 from collections import deque
@@ -39,11 +48,14 @@ import numpy as np
 
 from mixture_ip_ros.core.novelty import NoveltyMonitor, NoveltyThresholds
 from mixture_ip_ros.estimation.held import HeldSamples
+from mixture_ip_ros.estimation.planner_settings import PlannerSettings
 from mixture_ip_ros.estimation.plans import (JointLimits, Plan, PosteriorSummary, build_plan,
                                              check_plan, end_summary, posterior_summary,
                                              within_limits)
 from mixture_ip_ros.estimation.records import Interaction, ObservationCounts, Switch
 from mixture_ip_ros.estimation.schedule import ReplanSchedule
+from mixture_ip_ros.estimation.stale_inputs import StaleInputs
+from mixture_ip_ros.estimation.stream_clock import StreamClock
 
 STATES = ('idle', 'observing', 'committed', 'done')
 MAX_LAG = 1.0   # s; a present further ahead of the latest observation means another clock
@@ -56,50 +68,6 @@ def should_commit(component_posterior, n_observations: int, confidence_threshold
             and float(np.max(component_posterior)) >= confidence_threshold)
 
 
-@dataclass(frozen=True)
-class PlannerSettings:
-    """How the planner commits, replans and plans. ``replan_period`` is 1 / the replan rate;
-    ``backlog_slice``: held samples conditioned on per call after an onset;
-    ``max_clock_offset`` (s, 0 = no check): a plan resting on an observation stamped further
-    than this from the caller's clock is not sent (the observations are on another clock, and
-    the controller would wait for a start years away). ``hedge``: before the commit, once the
-    commit waits on confidence alone, send the plan with the component marginalised too
-    (estimation.plans.build_plan's ``hedged``), so that the robot is under way when the
-    interaction is recognised."""
-
-    confidence_threshold: float = 0.9
-    min_observations: int = 3
-    n_points: int = 25
-    lookahead: float = 0.1
-    settle_time: float = 0.5
-    hold_window: float = 2.5
-    backlog_slice: int = 8
-    replan_period: float = 0.1
-    replan_on_observation: bool = True
-    max_records: int = 1000
-    max_clock_offset: float = 0.0
-    hedge: bool = False
-
-    def __post_init__(self):
-        def need(ok, what):
-            if not ok:
-                raise ValueError(what)
-        need(0.0 < self.confidence_threshold <= 1.0,
-             f'confidence_threshold must be in (0, 1], got {self.confidence_threshold}')
-        for name, low in (('min_observations', 1), ('n_points', 2), ('backlog_slice', 1),
-                          ('max_records', 1)):
-            value = getattr(self, name)
-            need(int(value) == value and value >= low,
-                 f'{name} must be an integer >= {low}, got {value}')
-        need(np.isfinite(self.lookahead) and self.lookahead >= 0,
-             f'lookahead must be >= 0 s, got {self.lookahead}')
-        for name in ('settle_time', 'hold_window', 'replan_period'):
-            value = getattr(self, name)
-            need(np.isfinite(value) and value > 0, f'{name} must be > 0 s, got {value}')
-        need(np.isfinite(self.max_clock_offset) and self.max_clock_offset >= 0,
-             f'max_clock_offset must be >= 0 s, got {self.max_clock_offset}')
-
-
 @dataclass
 class Step:
     """What one replan produced: always the posterior summary and the plan (its hypothesis is
@@ -107,7 +75,8 @@ class Step:
     ``problem`` why the plan may not be published; ``unexplained`` why the movement is none the
     model knows (no commit; once the robot moves, ``hold``: it must stop where it is).
     ``trigger_ns``: the stamp of the latest evidence the plan rests on (the observation or the
-    'end' event that brought it)."""
+    'end' event that brought it). ``withheld``: why a plan that would have gone out did not (the
+    arm's state is stale); ``notice``: a line to log, once per spell of what it reports."""
 
     summary: PosteriorSummary
     plan: Optional[Plan]
@@ -117,7 +86,9 @@ class Step:
     switched_from: Optional[int] = None
     problem: Optional[str] = None
     unexplained: Optional[str] = None   # why the model does not explain the movement
-    hold: bool = False                  # stop the robot where it is (the movement is unexplained)
+    hold: bool = False                  # stop the robot where it is (unexplained, or silent)
+    withheld: Optional[str] = None
+    notice: Optional[str] = None
 
 
 class OnlinePlanner:
@@ -143,6 +114,7 @@ class OnlinePlanner:
         # Commit only to movements the model explains (core.novelty); None: on confidence alone.
         self._novelty = None if novelty is None else NoveltyMonitor(novelty)
         self.robot_state = None   # the arm's latest (joints, joint speeds), set by the node
+        self._inputs = StaleInputs()
         self.state = 'idle'
         self.interactions = []
         self.counts = ObservationCounts()
@@ -157,6 +129,7 @@ class OnlinePlanner:
         self._dirty = False       # something new since the last replan
         self._sent_component = None
         self._final_time = None   # time of the last final (at rest) plan's point
+        self._clock = StreamClock()
 
     # -- settings ---------------------------------------------------------------------
     @property
@@ -213,6 +186,11 @@ class OnlinePlanner:
         self._received()
         return self._rejected_in_interaction(reason)
 
+    def joint_state(self, q, qd, now_ns: Optional[int] = None) -> None:
+        """The arm's latest joints and joint speeds, received at ``now_ns`` (caller's clock)."""
+        self.robot_state = (q, qd)
+        self._inputs.joint_state(now_ns)
+
     def onset(self, stamp_ns: int) -> bool:
         """Start an interaction at ``stamp_ns``: the held observations from then on are
         admitted into the backlog (older ones were rest before the movement: dropped). True if
@@ -229,6 +207,7 @@ class OnlinePlanner:
         self._dirty = True
         self._sent_component = None
         self._final_time = None
+        self._inputs.onset()
         self.state = 'observing'
         excess = len(self.interactions) + 1 - self._settings.max_records
         if excess > 0:
@@ -245,7 +224,10 @@ class OnlinePlanner:
 
     def observe(self, stamp_ns: int, y, now_ns: Optional[int] = None):
         """Feed one observation; returns (result, whether a replan is due now)."""
+        self._watch_clock(now_ns)
+        self._clock.observed(stamp_ns, now_ns, self._settings.max_clock_offset)
         result = self._observe(int(stamp_ns), y)
+        self._inputs.heard(now_ns)
         finished_backlog = self._absorb_slice()
         if result == 'used' and self._schedule.due_on_observation(self.t_now, now_ns):
             self._schedule.observation_replanned(self.t_now)
@@ -255,12 +237,16 @@ class OnlinePlanner:
     def tick(self, now_ns: Optional[int] = None) -> bool:
         """The replan timer: absorbs a slice of the backlog; True if that finished it or no
         observation replanned for a period (a replan is due)."""
-        return self._absorb_slice() or self._schedule.due_on_timer(now_ns)
+        self._watch_clock(now_ns)
+        silent = self._silence(now_ns) is not None
+        return self._absorb_slice() or self._schedule.due_on_timer(now_ns) or silent
 
     def end(self, stamp_ns: int, now_ns: Optional[int] = None) -> Optional[Step]:
         """The human stopped (``stamp_ns``, dated back to when the hand came to rest): the last
         plan, its component chosen with the end time known (:func:`end_summary`) and sent only
-        if committed, then 'done'."""
+        if committed, then 'done'. None when there is nothing to send: no interaction, or the
+        stream stopped (estimation.stream_clock: a plan would start in the past; no error)."""
+        self._watch_clock(now_ns)
         if not self.active:
             return None
         self._absorb_slice(len(self._backlog))
@@ -270,6 +256,9 @@ class OnlinePlanner:
         # The end is dated back to when the hand came to rest, at least the observer's
         # end_hold before it is confirmed: the clock check judges the latest observation.
         self._fresh_ns = max(int(stamp_ns), self._trigger_ns)
+        if self._clock.stream_stopped(self._fresh_ns, now_ns, self._settings.max_clock_offset):
+            self._close('stream_stopped', t_end if np.isfinite(t_end) else None)
+            return None
         self._trigger_ns = int(stamp_ns)     # the end is dated back: often before the latest
         step = self.replan(now_ns, final=True, t_end=t_end)
         self._close('end', t_end)
@@ -362,7 +351,12 @@ class OnlinePlanner:
         never already in the past when the controller receives it. ``t_end``: the end of the
         movement (s since onset), known with the observer's 'end': the component is then chosen
         with the phase known (:func:`end_summary`)."""
-        if not self.active or not (self._dirty or final):
+        if not self.active:
+            return None
+        silence = None if final else self._silence(now_ns)
+        if silence is not None:
+            return self._end_silent(silence)
+        if not (self._dirty or final):
             return None
         self._dirty = False
         self._schedule.replanned(now_ns)
@@ -412,6 +406,11 @@ class OnlinePlanner:
                         unexplained=unexplained)
         if waiting and not hedged:
             return Step(summary, plan, send=False, trigger_ns=trigger, unexplained=unexplained)
+        stale, new = self._inputs.stale_state(now_ns, s.max_joint_state_age)
+        if stale is not None:
+            self.counts.stale_joint_states += new
+            return Step(summary, plan, send=False, trigger_ns=trigger, withheld=stale,
+                        notice=f'{stale}: no plan is sent until it comes' if new else None)
         committed_now = False
         if not waiting and self.state == 'observing':
             committed_now = True
@@ -432,6 +431,20 @@ class OnlinePlanner:
         rec.plans += 1
         return Step(summary, plan, send=True, trigger_ns=trigger, committed_now=committed_now,
                     switched_from=switched_from)
+
+    def _silence(self, now_ns) -> Optional[str]:
+        return (self._inputs.silence(now_ns, self._settings.max_wrist_silence)
+                if self.active else None)
+
+    def _end_silent(self, why: str) -> Step:
+        """End the interaction whose wrist stream is gone: no plan; a robot that moved holds."""
+        moved = self.state == 'committed' or self.current.hedged_plans > 0
+        self.counts.silent_ends += 1
+        summary = posterior_summary(self.estimator, self.t_now)
+        self._close('wrist_silent', self.t_now)
+        return Step(summary, None, send=False, trigger_ns=self._trigger_ns, hold=moved,
+                    notice=f'{why}: the interaction ends'
+                    + (', the robot holds' if moved else ''))
 
     def _checked(self, plan, t_plan, fresh_ns, now_ns):
         """(the plan to send, None) or (None, why not), each refusal counted by kind. A plan
@@ -454,6 +467,12 @@ class OnlinePlanner:
             return plan, None
         self.counts.plan_refusals[kind] += 1
         return None, why
+
+    def _watch_clock(self, now_ns: Optional[int]) -> None:
+        """A clock jumping back by more than max_clock_offset (a simulated clock restarted)
+        ends the interaction in progress: what comes next is stamped on the new time."""
+        if self._clock.tick(now_ns, self._settings.max_clock_offset) and self.active:
+            self._close('clock_reset', None)
 
     def _close(self, reason: str, t_end: Optional[float]) -> None:
         self._backlog.clear()

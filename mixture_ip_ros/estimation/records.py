@@ -39,9 +39,11 @@ class Interaction:
     the phase at the commit, the first plan sent on a confident component, i.e. the fraction of
     the human movement seen (None if the robot never committed); ``hedged_plans`` counts the
     plans sent before it (PlannerSettings.hedge). ``end_reason`` is 'end' (the observer's
-    event), 'new_onset' (another interaction started first), 'deactivated' (the node stopped)
-    or 'unexplained' (the movement stopped being one the model knows after the robot started
-    moving: it holds); None while it runs.
+    event), 'new_onset' (another interaction started first), 'deactivated' (the node stopped),
+    'unexplained' (the movement stopped being one the model knows after the robot started
+    moving: it holds), 'stream_stopped' (the observer's 'end' came long after the stream
+    stopped: no last plan) or 'clock_reset' (the clock jumped back); None while it runs. Also
+    'wrist_silent': no wrist observation for too long (the observer is gone).
     """
 
     onset_stamp_ns: int
@@ -98,6 +100,8 @@ class ObservationCounts:
     plan_refusals: dict = field(default_factory=lambda: dict.fromkeys(PLAN_REFUSALS, 0))
     plans_time_scaled: int = 0          # slowed down to respect the joint limits, then sent
     holds: int = 0                      # committed interactions stopped: unexplained movement
+    stale_joint_states: int = 0         # spells of plans not sent: the arm's state too old
+    silent_ends: int = 0                # interactions ended: no wrist observation for too long
 
     @property
     def n_rejected(self) -> int:

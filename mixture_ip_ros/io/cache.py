@@ -12,6 +12,8 @@ import os
 from pathlib import Path
 import tempfile
 
+from mixture_ip_ros.io.files import umask_mode
+
 
 def cache_dir() -> Path:
     if os.environ.get('MIXTURE_IP_CACHE'):
@@ -52,6 +54,7 @@ def download_verified(url: str, target, sha256: str, timeout: float = 60.0) -> P
             except OSError as error:
                 raise RuntimeError(f'could not download {url}: {error}') from None
         check_sha256(tmp, sha256)
+        os.chmod(tmp, umask_mode())      # mkstemp's file is private; the cache is the user's
         os.replace(tmp, target)
     finally:
         if os.path.exists(tmp):

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import csv
 import io
+import logging
 from pathlib import Path
 from typing import Sequence
 
@@ -23,6 +24,8 @@ import numpy as np
 
 from mixture_ip_ros.core.demonstration import Demonstration, Layout
 from mixture_ip_ros.io.files import write_text_atomic
+
+logger = logging.getLogger(__name__)
 
 
 class CsvError(ValueError):
@@ -119,16 +122,34 @@ def read_csv_demonstration(path, layout: Layout, time: str = 't') -> Demonstrati
     return Demonstration(t - t[0], a[:, 1:1 + P], a[:, 1 + P:], name=path.name)
 
 
-def load_csv_dataset(folder, layout: Layout, time: str = 't') -> list:
-    """Every ``*.csv`` file in ``folder`` (sorted by name) as a Demonstration. Raises CsvError
-    for the first bad file, ValueError if there is none."""
+def load_csv_dataset(folder, layout: Layout, time: str = 't', on_error: str = 'raise') -> list:
+    """Every ``*.csv`` file in ``folder`` (sorted by name) as a Demonstration.
+
+    ``on_error='raise'``: the first bad file raises its CsvError; ``'skip'``: a bad file is left
+    out with one warning naming it and why (io.dataset.load_dataset does the same with bags).
+    ValueError if there is no file, or no good one.
+    """
+    if on_error not in ('skip', 'raise'):
+        raise ValueError(f"on_error must be 'skip' or 'raise', got {on_error!r}")
     folder = Path(folder)
     if not folder.is_dir():
         raise ValueError(f'CSV folder {folder} does not exist or is not a directory')
     files = sorted(folder.glob('*.csv'))
     if not files:
         raise ValueError(f'no .csv files in {folder}')
-    return [read_csv_demonstration(f, layout, time) for f in files]
+    demos, skipped = [], []
+    for f in files:
+        try:
+            demos.append(read_csv_demonstration(f, layout, time))
+        except CsvError as error:
+            if on_error == 'raise':
+                raise
+            logger.warning('skipping %s', error)
+            skipped.append(f'{f.name}: {error}')
+    if not demos:
+        raise ValueError(f'none of the {len(files)} CSV files in {folder} could be read '
+                         f'(first: {skipped[0]})')
+    return demos
 
 
 def write_csv_demonstration(path, demo: Demonstration, layout: Layout, time: str = 't'):
@@ -143,6 +164,24 @@ def write_csv_demonstration(path, demo: Demonstration, layout: Layout, time: str
     for row in a:
         w.writerow(['' if np.isnan(v) else repr(float(v)) for v in row])
     return write_text_atomic(path, text.getvalue())
+
+
+# The units a column may be given in (recorded in the model as spelled here): the evaluation
+# reports errors of positions all in 'm' in cm, and --translation refuses to move columns of
+# different units together, so a unit must be one name per quantity, not any spelling of it.
+UNITS = {'m': 'metres', 'cm': 'centimetres', 'mm': 'millimetres', 'rad': 'radians',
+         'deg': 'degrees', 's': 'seconds', 'g': 'standard gravities (an accelerometer)'}
+
+
+def parse_units(text: str | None, what: str) -> Sequence[str]:
+    """'m,m,rad' -> ('m', 'm', 'rad') for the command line, each one of UNITS; '' or None ->
+    (). ValueError naming the accepted units otherwise."""
+    units = parse_names(text, what)
+    unknown = [u for u in units if u not in UNITS]
+    if unknown:
+        raise ValueError(f'{what}: unknown unit {unknown[0]!r}; give one of '
+                         f'{", ".join(f"{u} ({name})" for u, name in UNITS.items())}')
+    return units
 
 
 def parse_names(text: str | None, what: str) -> Sequence[str]:

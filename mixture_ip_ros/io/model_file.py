@@ -14,6 +14,12 @@ A model with phase warps (``model.warps_``, core.warped.PhaseWarps) adds their `
 ``sd_`` as the arrays ``warp_mean`` and ``warp_sd`` and their ``failed_`` as the metadata
 ``warp_failed``; a file without them loads with the linear phase (``warps_`` None), and an
 older package reading one uses the linear phase.
+
+A model fitted with labels (MixtureIProMP.fit's ``labels``: all demonstrations named, or some)
+records them as ``classes``, one per component, null for a component no label names (null
+altogether without labels); ``component_labels`` is what a consumer shows for each component
+(app.naming.named_components: the labels, and for the components they do not name, the
+majority of their demonstrations' own labels).
 """
 
 import json
@@ -216,7 +222,12 @@ def load_model(path, *, observed_names=None, controlled_names=None):
             model.offset_cov_ = _finite(offsets['cov'], (g, g))
     except (KeyError, TypeError, ValueError) as e:
         fail(f'invalid fitted smoothing or offsets ({e})')
-    model.classes_ = meta.get('classes')
+    classes = meta.get('classes')
+    if classes is not None and (not isinstance(classes, list) or len(classes) != K or not all(
+            c is None or isinstance(c, (str, int, float)) for c in classes)):
+        fail(f'classes must be null or name each of the {K} components (null: a component no '
+             f'label names), got {classes!r}')
+    model.classes_ = classes
     model.warps_ = None                             # files without them: the linear phase
     failed = meta.get('warp_failed', [])
     if not isinstance(failed, list) or not all(isinstance(n, (str, int)) for n in failed):

@@ -10,6 +10,12 @@ Messages are stored as CDR, which is what DDS carries, so they are published as 
 with ``rewrite_stamps`` are they deserialized to set ``header.stamp`` to the time the message is
 scheduled for on the node's clock (the current time, without the player's scheduling jitter).
 
+Looping: each pass starts one mean message period after the last message of the previous one.
+With ``rewrite_stamps`` the stamps go on with the clock and the wrist jumps back to where the
+bag starts; without, the stamps (and /clock, with ``publish_clock``) jump back to the bag's
+start. Either is a new stream to the observer (estimation.observer), so each pass is a new
+interaction.
+
 Pacing: playback runs in its own thread that sleeps on the monotonic clock until each message is
 due (no busy wait). With ``use_sim_time`` the player follows the node's simulated clock instead
 (checked every 2 ms): it starts at the first /clock it receives and publishes each message when

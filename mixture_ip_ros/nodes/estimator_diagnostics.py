@@ -39,6 +39,8 @@ def estimation_values(planner, latency, plan_latency, events) -> dict:
         'plan_latency_max_us': round(plan_latency.max_us, 1),
         'plans_sent': counts.plans_sent,
         'holds_unexplained': counts.holds,
+        'stale_joint_states': counts.stale_joint_states,
+        'ends_wrist_silent': counts.silent_ends,
         'unexplained': rec and rec.unexplained,
         'plans_time_scaled': counts.plans_time_scaled,
         **{f'plans_refused_{k}': v for k, v in counts.plan_refusals.items()},
@@ -66,3 +68,21 @@ class EstimationDiagnostics:
         else:
             level, message = OK, planner.state
         return diagnostic_array(stamp, DIAGNOSTIC_NAME, level, message, values)
+
+
+def finished_report(rec, settings, label: str) -> tuple:
+    """(whether it is a warning, the line) that estimator_node logs when the interaction
+    ``rec`` (estimation.records.Interaction) ends; ``label``: ' (its label)' of the component or
+    ''."""
+    if not rec.committed and rec.unexplained is not None:
+        return True, (f'interaction ended uncommitted, the model does not explain it '
+                      f'({rec.unexplained}): robot not moved')
+    if not rec.committed:
+        confidence = rec.confidence if rec.confidence is not None else float('nan')
+        return True, (f'interaction ended without a confident component (p(k*) = '
+                      f'{confidence:.3f} < {settings.confidence_threshold} or fewer than '
+                      f'{settings.min_observations} observations): robot not moved')
+    return False, (f'interaction done: component {rec.component}{label}, '
+                   f'alpha* = {rec.alpha:.3f}/s, committed at phase {rec.commit_phase:.3f}, '
+                   f'{rec.n_observations} observations used, {rec.plans} plans, '
+                   f'{len(rec.switches)} switches')

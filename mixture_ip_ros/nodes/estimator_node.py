@@ -5,17 +5,18 @@ node; the logic is estimation.planner's, on the node clock.
 Subscribes  observation_topic  geometry_msgs/PointStamped (frame observed_frame), reliable
             event_topic        std_msgs/Header, frame_id 'onset' | 'end' | 'gap', reliable
             joint_state_topic  sensor_msgs/JointState (the arm's state, to time catching up)
-Publishes   trajectory_topic   trajectory_msgs/JointTrajectory, reliable: header.stamp = the
-                stamp of the latest observation the plan rests on (what triggered it; the
-                'end' event's stamp for the last plan), joint names of the model, points from
+Publishes   trajectory_topic   trajectory_msgs/JointTrajectory, reliable, liveliness_lease:
+                header.stamp = the stamp of the latest observation the plan rests on (the
+                'end' event's for the last plan), joint names of the model, points from
                 the present (plus lookahead) to the end of the slowest phase speed holding the
                 posterior, positions, velocities, accelerations of the expected trajectory with
                 the speed marginalised (estimation.plans); header.stamp + time_from_start =
-                onset + the time of each point. Sent once
-                p(k* | D) >= confidence_threshold with >= min_observations used (with hedge,
-                before that the plan with the component marginalised too), then at
-                replan_rate_hz while new observations arrive, and a last time on 'end'.
-                Deactivating sends an empty trajectory: the controller stops and holds.
+                onset + the time of each point. Sent once p(k* | D) >= confidence_threshold
+                with >= min_observations used (with hedge, before that the plan with the
+                component marginalised too), then at replan_rate_hz while new observations
+                arrive, and a last time on 'end'; none while the arm's state is stale.
+                Deactivating, or a wrist stream gone silent, sends an empty trajectory: the
+                controller stops and holds.
             path_topic         nav_msgs/Path: the whole predicted wrist movement under the
                 plan's component at its MAP phase speed alpha*, phases 0..1, pose stamps =
                 onset + z / alpha*.
@@ -49,7 +50,7 @@ from mixture_ip_ros.io.cdr import Float64MultiArrayEncoder, JointTrajectoryEncod
 from mixture_ip_ros.io.model_file import load_model
 from mixture_ip_ros.nodes import qos
 from mixture_ip_ros.nodes.diagnostics import PublishesDiagnostics
-from mixture_ip_ros.nodes.estimator_diagnostics import EstimationDiagnostics
+from mixture_ip_ros.nodes.estimator_diagnostics import EstimationDiagnostics, finished_report
 from mixture_ip_ros.nodes.managed import ManagedNode, run_node
 from mixture_ip_ros.nodes.markers import prediction_markers
 from mixture_ip_ros.nodes.params import (autostart_param, event_topic_param,
@@ -135,6 +136,17 @@ class EstimatorParameters:
     output_queue_depth: int = param(10, 'reliable outputs', low=1, high=100_000)
     log_throttle_sec: float = param(2.0, 'at most one rejection warning per this many seconds',
                                     low=0.0, high=3600.0)
+    liveliness_lease: float = param(0.1, "s; DDS liveliness lease of the trajectory publisher "
+                                    "(at most the sim's command_lease, shorter for a margin; "
+                                    '0 = none: a sim requesting one does not match)', low=0.0,
+                                    high=60.0)
+    max_joint_state_age: float = param(0.5, 's of the node clock: an older arm state sends no '
+                                            'plan until one comes (0 = no check)', low=0.0,
+                                       high=3600.0)
+    max_wrist_silence: float = param(2.5, 's of the node clock without a wrist observation: '
+                                          "the interaction ends, the robot holds (above the "
+                                          "observer's max_gap; 0 = no check)", low=0.0,
+                                     high=3600.0)
 
 
 class EstimatorNode(PublishesDiagnostics, ManagedNode):
@@ -209,7 +221,8 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
         self._path_encoder = PathEncoder(p.observed_frame)
         out = qos.reliable(p.output_queue_depth)
         publisher = self.create_lifecycle_publisher
-        self.trajectory_pub = publisher(JointTrajectory, p.trajectory_topic, out)
+        self.trajectory_pub = publisher(JointTrajectory, p.trajectory_topic,
+                                        qos.command(p.output_queue_depth, p.liveliness_lease))
         self.path_pub = publisher(Path, p.path_topic, out)
         self.posterior_pub = publisher(Float64MultiArray, p.posterior_topic, out)
         self.marker_pub = publisher(MarkerArray, p.marker_topic, out)
@@ -279,7 +292,7 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
         get = (lambda n: p.get(n)) if partial else (lambda n: getattr(p, n))
         names = ('confidence_threshold', 'min_observations', 'n_points', 'lookahead',
                  'settle_time', 'hold_window', 'backlog_slice', 'replan_on_observation',
-                 'max_clock_offset', 'hedge')
+                 'max_clock_offset', 'hedge', 'max_joint_state_age', 'max_wrist_silence')
         values = {n: get(n) for n in names if get(n) is not None}
         if get('replan_rate_hz') is not None:
             values['replan_period'] = 1.0 / get('replan_rate_hz')
@@ -353,7 +366,10 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
             elif kind == 'end':
                 if self.planner.active:
                     self._publish(self.planner.end(stamp_to_ns(msg.stamp), self._now_ns()), t0)
-                    self._log_finished(self.planner.current)
+                    rec = self.planner.current
+                    warn, text = finished_report(rec, self.planner.settings,
+                                                 self._label(rec.component))
+                    (self.get_logger().warning if warn else self.get_logger().info)(text)
             else:
                 self.planner.gap()
         except Exception as exc:
@@ -372,7 +388,7 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
                     np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
                 self.planner.reject('bad_joint_state')
                 return
-            self.planner.robot_state = (q, qd)
+            self.planner.joint_state(q, qd, self._now_ns())
         except (KeyError, IndexError):
             self.planner.reject('bad_joint_state')
 
@@ -397,8 +413,10 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
             return
         if step.hold:
             self.trajectory_pub.publish(JointTrajectory(joint_names=list(self.params.joint_names)))
-            self.get_logger().warning(f'the movement is none the model knows any more '
-                                      f'({step.unexplained}): the robot holds')
+            self.get_logger().warning(step.notice or f'the movement is none the model knows any '
+                                      f'more ({step.unexplained}): the robot holds')
+        elif step.notice is not None:
+            self.get_logger().warning(step.notice)
         elif step.unexplained is not None:
             self.get_logger().info(f'not committing: {step.unexplained}',
                                    throttle_duration_sec=self.params.log_throttle_sec)
@@ -413,8 +431,9 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
             self.plan_latency.add(time.perf_counter() - t0)
         self.posterior_pub.publish(self._posterior_encoder.encode(step.summary.as_array()))
         if plan is None:
-            self.get_logger().error(f'plan not published: {step.problem}',
-                                    throttle_duration_sec=self.params.log_throttle_sec)
+            if step.problem is not None:
+                self.get_logger().error(f'plan not published: {step.problem}',
+                                        throttle_duration_sec=self.params.log_throttle_sec)
             return
         self._publish_path(plan, onset_ns, step.trigger_ns)
         self._publish_markers(step, onset_ns)
@@ -469,25 +488,6 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
         counts = {k: v for k, v in self.planner.counts.rejected.items() if v}
         self.get_logger().warning(f'observation rejected ({reason}, {detail}); rejected so far: '
                                   f'{counts}', throttle_duration_sec=self.params.log_throttle_sec)
-
-    def _log_finished(self, rec) -> None:
-        if not rec.committed and rec.unexplained is not None:
-            self.get_logger().warning(
-                f'interaction ended uncommitted, the model does not explain it '
-                f'({rec.unexplained}): robot not moved')
-            return
-        if not rec.committed:
-            confidence = rec.confidence if rec.confidence is not None else float('nan')
-            self.get_logger().warning(
-                f'interaction ended without a confident component (p(k*) = {confidence:.3f} < '
-                f'{self.planner.settings.confidence_threshold} or fewer than '
-                f'{self.planner.settings.min_observations} observations): robot not moved')
-            return
-        self.get_logger().info(
-            f'interaction done: component {rec.component}{self._label(rec.component)}, '
-            f'alpha* = {rec.alpha:.3f}/s, committed at phase {rec.commit_phase:.3f}, '
-            f'{rec.n_observations} observations used, {rec.plans} plans, '
-            f'{len(rec.switches)} switches')
 
 
 def main(args=None):

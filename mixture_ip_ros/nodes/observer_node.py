@@ -11,7 +11,9 @@ Publishes   observation_topic  geometry_msgs/PointStamped in base_frame with the
 Both outputs are reliable with a deep queue: the estimator must not lose observations. A pose's
 own observation goes out before the events it settles. Poses that fail a check (malformed, on
 another clock, not a person's wrist: estimation.observer) are dropped and counted; a whole stream
-on another clock is warned about.
+on another clock is warned about. A new stream (a replay looping or restarted: estimation.observer
+says when) ends the interaction in progress with an 'end' sent before anything of the new
+stream, whose onset then starts the next interaction.
 """
 
 from dataclasses import dataclass
@@ -137,6 +139,13 @@ class ObserverParameters:
                                     low=0.0, high=3600.0)
     restart_after_backwards: int = param(50, 'consecutive older stamps = the stream restarted '
                                              '(0 = never)', low=0, high=1_000_000)
+    new_stream_jump_back: float = param(0.1, 's; stamps jumping back by more at once = a new '
+                                             'stream (a replay restarted)', low=0.0, high=1e9,
+                                        check=positive, rule='> 0')
+    new_stream_samples: int = param(3, 'at rest, this many poses in a row out of reach of '
+                                       'the last one but a hand\'s path among themselves = '
+                                       'a new stream (a replay looping; 0 = never)', low=0,
+                                    high=1000)
     diagnostics_period: float = param(1.0, 's between /diagnostics messages', low=0.001,
                                       high=3600.0)
 
@@ -172,7 +181,9 @@ class ObserverNode(PublishesDiagnostics, ManagedNode):
             segmenter, FrameTransform(p.mocap_to_base_xyz, p.mocap_to_base_xyzw),
             expected_frame=p.expected_frame, quaternion_tolerance=p.quaternion_tolerance,
             restart_after_backwards=p.restart_after_backwards,
-            max_clock_offset=p.max_clock_offset, limits=limits)
+            max_clock_offset=p.max_clock_offset, limits=limits,
+            new_stream_jump_back=p.new_stream_jump_back,
+            new_stream_samples=p.new_stream_samples)
         out = qos.reliable(p.output_queue_depth)
         publisher = self.create_lifecycle_publisher
         self.observation_pub = publisher(PointStamped, p.observation_topic, out)
@@ -242,15 +253,25 @@ class ObserverNode(PublishesDiagnostics, ManagedNode):
             self._log_drop(f'wrist pose dropped ({out.rejected}, frame '
                            f'{msg.header.frame_id!r}, stamp {stamp.sec}.{stamp.nanosec:09d})')
             return
+        if out.held:
+            return
         if out.restarted:
-            self.get_logger().warning(
-                f'{self.params.restart_after_backwards} consecutive wrist poses older than '
-                'the last accepted one: taking the stream as restarted')
+            # A replay looping or restarted: expected, and what follows is a stream as any.
+            self.get_logger().info(f'a new wrist stream: {out.restarted}')
+        # The old stream's end before anything of the new one, whose poses held back to
+        # recognise it go out first, with their own stamps.
+        self._publish_events(out.ended)
+        for stamp_ns, xyz in out.released:
+            sec, nanosec = ns_to_parts(stamp_ns)
+            self._publish_point(Time(sec=sec, nanosec=nanosec), xyz)
+        self._publish_point(stamp, out.point)
+        self._publish_events(out.events)
+
+    def _publish_point(self, stamp, xyz) -> None:
         point = self._point          # one message, filled per pose (publish serializes it)
         point.header.stamp = stamp
-        point.point.x, point.point.y, point.point.z = out.point
+        point.point.x, point.point.y, point.point.z = xyz
         self.observation_pub.publish(point)
-        self._publish_events(out.events)
 
     def on_timer(self) -> None:
         try:

@@ -2,8 +2,9 @@
 
 import copy
 
-from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
-                       qos_profile_sensor_data)
+from rclpy.duration import Duration
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile,
+                       ReliabilityPolicy, qos_profile_sensor_data)
 
 
 def reliable(depth: int) -> QoSProfile:
@@ -11,6 +12,19 @@ def reliable(depth: int) -> QoSProfile:
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=int(depth),
                       reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE)
+
+
+def command(depth: int, lease: float) -> QoSProfile:
+    """Commands to the arm: reliable, and with ``lease`` > 0 (s) DDS liveliness AUTOMATIC with
+    that lease: offered by a publisher (asserted by its DDS participant while the process
+    runs), requested by a subscriber, which then hears when a publisher is gone. A subscriber
+    matches only publishers offering a lease at most as long as the one it requests; 0: no lease
+    (any publisher matches, and none is watched)."""
+    qos = reliable(depth)
+    if lease > 0:
+        qos.liveliness = LivelinessPolicy.AUTOMATIC
+        qos.liveliness_lease_duration = Duration(nanoseconds=round(lease * 1e9))
+    return qos
 
 
 def sensor_data(depth: int = 5) -> QoSProfile:

@@ -4,10 +4,12 @@ The arm is the parameter ``robot``: a shipped robot's name (config/robots/) or a
 description file; its description gives the defaults of initial_positions, the gains and
 base_frame.
 
-Subscribes  joint_trajectory (trajectory_msgs/JointTrajectory, reliable) while active
+Subscribes  joint_trajectory (trajectory_msgs/JointTrajectory, reliable, DDS liveliness with
+            the lease command_lease) while active, taken from the node ``commander`` only
 Publishes   joint_states (sensor_msgs/JointState), flange_pose (geometry_msgs/PoseStamped)
             and, in simulated-time mode, /clock (rosgraph_msgs/Clock), all at publish_rate Hz of
-            simulated time
+            simulated time; /diagnostics (diagnostic_msgs/DiagnosticArray) every
+            diagnostics_period s
 
 The robot's topics are relative names, so they name no particular arm: they resolve in the
 node's namespace (``--ros-args -r __ns:=/arm`` gives /arm/joint_trajectory) and are remapped
@@ -20,6 +22,17 @@ accepts trajectories; deactivate drops the trajectory in progress at once and ho
 position (the physics and the clock go on: the arm does not fall); cleanup stops the simulation.
 An empty trajectory (no points) also stops the motion and holds, as on
 joint_trajectory_controller's topic interface.
+
+One commander (robot.commander): commands are taken from the node ``commander`` alone. Another
+publisher on the command topic is found in the ROS graph (on each command and at each
+diagnostics report) and warned about once; while it is there no command is taken (a message
+does not say who sent it), each refusal counted. An empty trajectory, which only stops the arm,
+is taken from anyone. With ``command_lease`` the subscription requests DDS liveliness: when a
+publisher is gone (its process killed, or stalled longer than the lease) the arm stops following
+its plan, braking within its acceleration limits, and holds (RobotSimulation.stop), until the
+next command. FastDDS asserts no automatic liveliness between the nodes of one DDS participant
+(one rclpy context): a commander there lapses a lease after each message, so such a process runs
+the sim with command_lease 0 (app.closed_loop).
 
 Time: with simulated_time true, ROS time is the simulation time, published on /clock; other nodes
 run with use_sim_time. Each timer callback advances periods_per_callback publish periods
@@ -35,9 +48,12 @@ on the steady clock, so it never waits on the clock it publishes.
 
 from dataclasses import dataclass
 
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 import numpy as np
 from rclpy.clock import Clock, ClockType
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.qos import QoSCompatibility, qos_check_compatible
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from builtin_interfaces.msg import Time
@@ -45,8 +61,10 @@ from trajectory_msgs.msg import JointTrajectory
 
 from mixture_ip_ros.core.stamps import ns_to_parts, seconds_to_ns, stamp_to_ns
 from mixture_ip_ros.nodes import qos
+from mixture_ip_ros.nodes.diagnostics import OK, WARN, diagnostic_array
 from mixture_ip_ros.nodes.managed import ManagedNode, run_node
 from mixture_ip_ros.nodes.params import autostart_param, finite_list, param, positive
+from mixture_ip_ros.robot.commander import CommandWatch, Publisher
 from mixture_ip_ros.robot.description import DEFAULT_ROBOT, load_description, shipped_robots
 from mixture_ip_ros.robot.sim import DEFAULT_MAX_DELAY, RobotSimulation
 from mixture_ip_ros.robot.trajectory import DEFAULT_MAX_POINTS, TrajectoryPoint, too_many_points
@@ -57,6 +75,8 @@ PER_JOINT = ('initial_positions', 'natural_frequency', 'damping_ratio')
 COMMAND_TOPIC = 'joint_trajectory'
 JOINT_STATE_TOPIC = 'joint_states'
 POSE_TOPIC = 'flange_pose'
+DIAGNOSTIC_NAME = 'sim_node: arm'
+UNKNOWN_NODE = '_NODE_NAME_UNKNOWN_'      # the graph's name of a node not yet discovered
 
 
 @dataclass
@@ -112,6 +132,19 @@ class SimParameters:
                              'clock, or held up); one that comes too late for the arm to follow '
                              'starts later, when the arm can reach its first point within the '
                              'joint limits', low=0.0, high=1e9)
+    commander: str = param('estimator_node', 'the one node whose commands are taken: a node '
+                           "name, in any namespace, or a full name ('/arm/estimator_node'). "
+                           'While another publisher is on the command topic no command is '
+                           'taken (warned about once, each refusal counted); an empty '
+                           "trajectory (stop) is taken from anyone. '' = any publisher")
+    command_lease: float = param(0.3, 's; DDS liveliness lease requested of the command '
+                                      'publishers: a publisher gone (or stalled) this long '
+                                      'stops the plan in progress, the arm braking within its '
+                                      'limits, and it holds. Publishers must offer a lease no '
+                                      "longer (the estimator's liveliness_lease); 0 = none: any "
+                                      'publisher matches, none is watched', low=0.0, high=60.0)
+    diagnostics_period: float = param(1.0, 's between /diagnostics messages', low=0.001,
+                                      high=3600.0)
 
 
 class SimNode(ManagedNode):
@@ -124,6 +157,8 @@ class SimNode(ManagedNode):
         self.sim = None
         self.trajectory_sub = None
         self._timer = None
+        self.watch = CommandWatch(self.params.commander)
+        self._reported = (0, 0, 0)   # rejections, refusals, lapses in the previous report
 
     @staticmethod
     def robot_defaults(robot: str) -> dict:
@@ -181,6 +216,10 @@ class SimNode(ManagedNode):
         else:
             period = self.publish_period
         self._timer = self.create_timer(period, self._on_timer, clock=self._steady)
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics',
+                                                     qos.reliable(10))
+        self._diagnostics_timer = self.create_timer(p.diagnostics_period, self._on_diagnostics,
+                                                    clock=self._steady)
         self._publish()
         pace = (f'simulated time, real-time factor {p.real_time_factor or "unlimited"}'
                 if p.simulated_time else 'wall-clock time')
@@ -188,8 +227,13 @@ class SimNode(ManagedNode):
                                f'publishing every {self.publish_period * 1e3:.0f} ms of {pace}')
 
     def activate(self) -> None:
+        self._command_qos = qos.command(10, self.params.command_lease)
+        events = SubscriptionEventCallbacks(
+            incompatible_qos=self._on_incompatible,
+            liveliness=self._on_liveliness if self.params.command_lease > 0 else None)
         self.trajectory_sub = self.create_subscription(
-            JointTrajectory, COMMAND_TOPIC, self._on_trajectory, qos.reliable(10))
+            JointTrajectory, COMMAND_TOPIC, self._on_trajectory, self._command_qos,
+            event_callbacks=events)
 
     def deactivate(self) -> None:
         if self.trajectory_sub is not None:
@@ -199,13 +243,15 @@ class SimNode(ManagedNode):
             self.sim.cancel_trajectory()
 
     def cleanup(self) -> None:
-        if self._timer is not None:
-            self.destroy_timer(self._timer)
+        for timer in (self._timer, getattr(self, '_diagnostics_timer', None)):
+            if timer is not None:
+                self.destroy_timer(timer)
         for pub in (getattr(self, 'joint_state_pub', None), getattr(self, 'flange_pub', None),
-                    getattr(self, 'clock_pub', None)):
+                    getattr(self, 'clock_pub', None), getattr(self, 'diagnostics_pub', None)):
             if pub is not None:
                 self.destroy_publisher(pub)
-        self._timer = self.joint_state_pub = self.flange_pub = self.clock_pub = None
+        self._timer = self._diagnostics_timer = None
+        self.joint_state_pub = self.flange_pub = self.clock_pub = self.diagnostics_pub = None
         self.sim = None
 
     # -- time ---------------------------------------------------------------------------
@@ -218,6 +264,12 @@ class SimNode(ManagedNode):
     # -- callbacks ----------------------------------------------------------------------
     def _on_trajectory(self, msg: JointTrajectory) -> None:
         try:
+            self._check_graph()
+            taken, why = self.watch.accept(stop=not msg.points)
+            if why:
+                self.get_logger().warning(why)
+            if not taken:
+                return
             if not msg.points:
                 self.sim.cancel_trajectory()
                 self.get_logger().info('empty trajectory: stopping and holding the position')
@@ -235,6 +287,79 @@ class SimNode(ManagedNode):
             self.sim.set_trajectory(list(msg.joint_names), points, start)
         except Exception as error:  # a bad message must never kill the node
             self.sim.refuse(f'malformed trajectory: {error}')
+
+    # -- the command topic's publishers -----------------------------------------------
+    def _check_graph(self) -> None:
+        """Tell the watch who publishes on the command topic (robot.commander)."""
+        sub = self.trajectory_sub
+        if sub is None:
+            return
+        publishers = []
+        for info in self.get_publishers_info_by_topic(sub.topic_name):
+            node = ('' if info.node_name == UNKNOWN_NODE else
+                    info.node_namespace.rstrip('/') + '/' + info.node_name)
+            fits = qos_check_compatible(info.qos_profile, self._command_qos)[0]
+            publishers.append(Publisher(node, bytes(info.endpoint_gid),
+                                        fits != QoSCompatibility.ERROR))
+        for line in self.watch.graph(publishers, sub.get_publisher_count()):
+            self.get_logger().warning(line)
+
+    def _on_incompatible(self, _status) -> None:
+        self.get_logger().warning(self.watch.incompatible_publisher())
+
+    def _on_liveliness(self, status) -> None:
+        try:
+            following = self.sim is not None and self.sim.following
+            if self.watch.liveliness(status.alive_count, status.alive_count_change,
+                                     self.sim.time if self.sim else 0.0, following):
+                self.sim.stop()
+                self.get_logger().warning(
+                    'a publisher on the command topic is gone (it left, or asserted no '
+                    f'liveliness for {self.params.command_lease} s): the arm stops within its '
+                    'limits and holds')
+            elif status.alive_count_change < 0:
+                self.get_logger().info('a publisher on the command topic is gone; the arm '
+                                       'was not moving')
+        except Exception as exc:  # a callback must never kill the node
+            self.get_logger().error(f'liveliness change not handled: {exc!r}')
+
+    # -- diagnostics ---------------------------------------------------------------------
+    def diagnostics_msg(self) -> DiagnosticArray:
+        sim, watch = self.sim, self.watch
+        values = {
+            'state': 'following' if sim.following else 'holding',
+            'commands_accepted': sim.accepted_count,
+            'commands_rejected': sim.rejection_count,
+            'last_rejection': sim.last_rejection,
+            'commands_retimed': sim.retimed_count,
+            'commander': self.params.commander,
+            'commands_refused_sender': watch.refused,
+            'refusing': watch.blocked,
+            'other_publishers': watch.others,
+            'incompatible_publishers': watch.incompatible,
+            'publishers_alive': watch.alive,
+            'liveliness_lapses': watch.lapses,
+            'holds_source_lost': watch.holds,
+            'controller_faults': sim.controller.fault_count,
+        }
+        totals = (sim.rejection_count, watch.refused, watch.lapses)
+        new = [now - before for now, before in zip(totals, self._reported)]
+        self._reported = totals
+        problems = [f'{n} {what}' for n, what in zip(new, ('commands rejected',
+                                                           'commands refused (sender)',
+                                                           'publishers gone')) if n]
+        sec, nanosec = ns_to_parts(self._ros_now_ns())
+        stamp = Time(sec=sec, nanosec=nanosec)
+        return diagnostic_array(stamp, DIAGNOSTIC_NAME, WARN if problems else OK,
+                                '; '.join([values['state']] + problems), values)
+
+    def _on_diagnostics(self) -> None:
+        # A report that cannot be built or sent is logged, never raised: the arm goes on.
+        try:
+            self._check_graph()
+            self.diagnostics_pub.publish(self.diagnostics_msg())
+        except Exception as exc:
+            self.get_logger().error(f'diagnostics failed: {exc!r}')
 
     def _on_timer(self) -> None:
         p = self.params

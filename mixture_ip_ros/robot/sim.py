@@ -14,7 +14,8 @@ from mixture_ip_ros.robot.kinematics import RobotKinematics
 from mixture_ip_ros.robot.scene import FLANGE_SITE, build_scene
 from mixture_ip_ros.estimation.plans import JointLimits
 from mixture_ip_ros.robot.trajectory import (DEFAULT_MAX_POINTS, TrajectoryFollower,
-                                             TrajectoryPoint, validate_trajectory)
+                                             TrajectoryPoint, stopping_trajectory,
+                                             validate_trajectory)
 
 # s a command may arrive after its first point was due and still be executed (re-timed); the
 # estimator's max_clock_offset, for plans resting on observations, is the same.
@@ -199,6 +200,21 @@ class RobotSimulation:
         """Drop the trajectory and hold the current position."""
         self.follower.clear()
         self.controller.reset_hold()
+
+    @property
+    def following(self) -> bool:
+        """Whether the arm is on a trajectory not yet at its end."""
+        return self.follower.following(self.time)
+
+    def stop(self) -> bool:
+        """Stop following the trajectory in progress: brake to rest within the joint
+        acceleration limits (robot.trajectory.stopping_trajectory, from the state the next step
+        starts from) and hold there. False, and nothing changes, if there is none."""
+        if not self.following:
+            return False
+        q, qd = self.follower.blend_state(self.time, self.q, self.qd)
+        self.follower.set(stopping_trajectory(q, qd, self.limits.acceleration, self.dt))
+        return True
 
     # ------------------------------------------------------------------ stepping
     def step(self, n: int = 1) -> None:

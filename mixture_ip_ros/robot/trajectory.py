@@ -245,6 +245,26 @@ def validate_trajectory(joint_names: Sequence[str], points: Sequence[TrajectoryP
                            delay=float(delay))
 
 
+
+def stopping_trajectory(q, qd, acceleration, control_period: float) -> JointTrajectory:
+    """To rest from the state (``q``, ``qd``) at constant deceleration, within the joint
+    acceleration limits, along the present direction of motion: every joint stops at the same
+    time T = max_j |qd_j| / acceleration_j (at least one ``control_period``), so the joint that
+    needs longest brakes at its limit and the others less, and the arm stops on the path it was
+    on. One point, (q + qd T / 2, at rest) at T, starting when first sampled: the follower's
+    cubic blend from (q, qd) into it is exactly that deceleration (its cubic term vanishes).
+    To be sampled from the state it was computed from (the next control step)."""
+    q = np.asarray(q, dtype=float)
+    qd = np.asarray(qd, dtype=float)
+    T = max(float(np.max(np.abs(qd) / np.asarray(acceleration, dtype=float))),
+            float(control_period), 1e-9)
+    dof = len(q)
+    zero = np.zeros((1, dof))
+    return JointTrajectory(start_time=None, times=np.array([T]),
+                           positions=(q + 0.5 * T * qd)[None, :], velocities=zero,
+                           accelerations=zero.copy(), has_velocities=np.array([True]),
+                           has_accelerations=np.array([False]))
+
 @dataclass
 class _Plan:
     t0: list                           # segment start times (absolute)
@@ -281,6 +301,12 @@ class TrajectoryFollower:
     @property
     def active(self) -> bool:
         return self._plan is not None or self._pending is not None
+
+    def following(self, t: float) -> bool:
+        """Whether a trajectory is set and not yet at its end at ``t`` (after it, the arm
+        holds its last point)."""
+        return self._pending is not None or (self._plan is not None
+                                             and t < self._plan.end_time)
 
     def set(self, trajectory: JointTrajectory) -> None:
         self._pending = trajectory

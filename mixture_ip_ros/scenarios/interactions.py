@@ -7,15 +7,15 @@ Everything is set in config/interactions.yaml (:func:`load_config`):
   other person, y left, z up). Where person 1 stood in the partner's (person 2's) frame is not in
   the data; it is derived from it (:func:`derive_person1_to_partner`: in handshakes and fist
   bumps the right hands touch) and stated in the config.
-- The arm in the partner's place (:class:`Scene`): the partner's right shoulder where the arm's
-  shoulder is, facing person 1 (robot.retarget.Placement), and the whole interaction scaled
-  about that shoulder by the reach scale of the training recordings' partner hands
-  (robot.retarget.reach_scale; 1 unless some are out of the arm's reach), so the two hands still
-  meet. Person 1's hand goes to the mocap frame ('world') through the same placement.
+- The arm in the partner's place (:func:`scene`, a robot.partner_place.PartnerPlace, the
+  placement any two people's recordings use): the partner's right shoulder where the arm's
+  shoulder is, facing person 1, and the whole interaction scaled about that shoulder by the
+  reach scale of the training recordings' partner hands, so the two hands still meet. Person
+  1's hand goes to the mocap frame ('world') through the same placement.
 - The partner's hand becomes the arm's joints (:func:`arm_interaction`): the tracker's glitches
   found with hindsight (estimation.pose_check.plausible_track) are missing samples, never
   targets; the path is low-passed and followed sample by sample within the arm's joint and
-  speed limits (robot.retarget.joint_path).
+  speed limits (robot.partner_place.PartnerPlace.joint_path).
 - Person 1's hand is replayed as recorded, glitches included (the observer drops what it drops),
   with the first plausible frame held ``rest_before`` s before it and the last ``rest_after`` s
   after it: the recordings are cut at the interaction's start and stop, and the observer needs
@@ -33,12 +33,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from mixture_ip_ros.core.segmentation import MotionSegmenter
 from mixture_ip_ros.core.share import config_path
 from mixture_ip_ros.estimation.pose_check import plausible_track
-from mixture_ip_ros.robot import retarget
+from mixture_ip_ros.robot import partner_place
+from mixture_ip_ros.robot.partner_place import AT_LEAST_0, PartnerPlace, PlacementConfig
 from mixture_ip_ros.scenarios import nuisi
 from mixture_ip_ros.scenarios.folders import write_scenario_bags
 from mixture_ip_ros.scenarios.recording import GeneratedDemo
@@ -51,22 +51,13 @@ _SEGMENTER_SETTINGS = tuple(p for p in inspect.signature(MotionSegmenter).parame
 
 
 @dataclass(frozen=True)
-class InteractionsConfig:
-    """config/interactions.yaml, checked (see the file for what each value means)."""
+class InteractionsConfig(PlacementConfig):
+    """config/interactions.yaml, checked (see the file for what each value means): the
+    placement (robot.partner_place) and this scenario's data, replays and node settings."""
 
-    source: str
     data: str
-    person1_xyz: tuple
-    person1_yaw: float
-    partner_shoulder: tuple
-    partner_yaw: float
-    reach_margin: float
     rest_before: float
     rest_after: float
-    lowpass_hz: float
-    posture_weight: float
-    limit_margin: float
-    speed_fraction: float
     observer: dict
     estimator: dict
 
@@ -75,50 +66,12 @@ def load_config(path=None) -> InteractionsConfig:
     """The scenario's settings from ``path`` (default config/interactions.yaml); ValueError with
     one line naming the file and the field for anything missing, unknown or out of range."""
     path = Path(path) if path is not None else config_path(CONFIG_FILE)
-
-    def fail(message):
-        raise ValueError(f'{path}: {message}')
-
-    try:
-        data = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise ValueError(f'{path}: cannot read the interactions settings: '
-                         f'{" ".join(str(exc).split())}') from exc
-    if not isinstance(data, dict):
-        fail('the interactions settings are a YAML mapping (key: value lines)')
-    sections = {'person1_to_partner': ('xyz', 'yaw'), 'partner': ('shoulder', 'yaw')}
-    positive, fraction = ('> 0', lambda v: v > 0), ('in (0, 1]', lambda v: 0 < v <= 1)
-    at_least_0 = ('>= 0', lambda v: v >= 0)
-    scalars = {'reach_margin': fraction, 'rest_before': at_least_0, 'rest_after': at_least_0,
-               'lowpass_hz': positive, 'posture_weight': at_least_0,
-               'limit_margin': at_least_0, 'speed_fraction': fraction}
-    known = {'data', 'observer', 'estimator', *sections, *scalars}
-    unknown = sorted(set(data) - known)
-    if unknown:
-        fail(f'unknown keys {unknown}; allowed: {sorted(known)}')
-    missing = sorted(known - {'observer', 'estimator'} - set(data))
-    if missing:
-        fail(f'missing keys {missing}')
-
-    def number(value, field, rule=('finite', lambda v: True)):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
-                math.isfinite(value) and rule[1](value)):
-            fail(f'{field} must be a finite number {rule[0]}, got {value!r}')
-        return float(value)
-
-    def point(value, field):
-        if not isinstance(value, list) or len(value) != 3:
-            fail(f'{field} must be 3 numbers [x, y, z], got {value!r}')
-        return tuple(number(v, field) for v in value)
-
-    parsed = {}
-    for key, fields in sections.items():
-        section = data[key]
-        if not isinstance(section, dict) or set(section) != set(fields):
-            fail(f'{key} must be a mapping with exactly {list(fields)}, got {section!r}')
-        parsed[key] = (point(section[fields[0]], f'{key}.{fields[0]}'),
-                       number(section['yaw'], f'{key}.yaw'))
-    values = {k: number(data[k], k, rule) for k, rule in scalars.items()}
+    settings = partner_place.Settings.read(path, 'interactions settings')
+    fail, data = settings.fail, settings.data
+    scalars = {'rest_before': AT_LEAST_0, 'rest_after': AT_LEAST_0}
+    settings.keys(('data', *partner_place.KEYS, *scalars), ('observer', 'estimator'))
+    placement = partner_place.placement_fields(settings)
+    values = {k: settings.number(data[k], k, rule) for k, rule in scalars.items()}
     if data['data'] not in nuisi.VERSIONS:
         fail(f'data must be a NuiSI version {sorted(nuisi.VERSIONS)}, got {data["data"]!r}')
     observer = data.get('observer') or {}
@@ -138,16 +91,13 @@ def load_config(path=None) -> InteractionsConfig:
         fail(f"estimator.hedge must be true or false, got {estimator['hedge']!r}")
     if 'lookahead' in estimator:
         estimator = {**estimator,
-                     'lookahead': number(estimator['lookahead'], 'estimator.lookahead',
-                                         ('in (0, 10]', lambda v: 0 < v <= 10))}
+                     'lookahead': settings.number(estimator['lookahead'], 'estimator.lookahead',
+                                                  ('in (0, 10]', lambda v: 0 < v <= 10))}
     if values['rest_after'] < observer.get('end_hold', _default_end_hold()):
         fail(f'rest_after ({values["rest_after"]} s) must be at least observer.end_hold: the '
              'observer needs that much rest to see the end')
-    return InteractionsConfig(
-        source=str(path), data=data['data'], person1_xyz=parsed['person1_to_partner'][0],
-        person1_yaw=parsed['person1_to_partner'][1], partner_shoulder=parsed['partner'][0],
-        partner_yaw=parsed['partner'][1], observer=dict(observer), estimator=estimator,
-        **values)
+    return InteractionsConfig(source=str(path), data=data['data'], observer=dict(observer),
+                              estimator=estimator, **placement, **values)
 
 
 def _default_end_hold() -> float:
@@ -167,11 +117,6 @@ def estimator_settings(config: InteractionsConfig) -> dict:
 
 # ------------------------------------------------------------------------------ frames
 
-def _yaw(angle: float) -> np.ndarray:
-    c, s = math.cos(angle), math.sin(angle)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
 def _hands(recording, person: int, version: str) -> tuple:
     """(the right hand (n, 3) of person 1 or 2, the mask of samples a hand can have made)."""
     v = nuisi.VERSIONS[version]
@@ -188,7 +133,7 @@ def derive_person1_to_partner(recordings, version: str = 'v2', yaw: float = math
     approach under the current xyz and sets xyz to the mean of the differences there, until the
     frames repeat. Samples a hand cannot have made (tracker glitches) are left out.
     Returns (xyz (3,), the closest approach per recording (m))."""
-    R = _yaw(yaw)
+    R = partner_place.rz(yaw)
     pairs = []
     for r in recordings:
         if r.label not in CONTACT:
@@ -215,51 +160,17 @@ def derive_partner_shoulder(recordings, version: str = 'v2') -> np.ndarray:
     return np.median(np.concatenate([r.person2[:, j] for r in recordings]), axis=0)
 
 
-@dataclass(frozen=True)
-class Scene:
-    """One arm in the partner's place: ``placement`` maps the partner's body frame into the
-    robot's base frame (scale included); person 1 goes there through their place in the
-    partner's frame, and on to the mocap frame through the robot's mount."""
-
-    config: InteractionsConfig
-    kin: object
-    placement: retarget.Placement
-
-    @property
-    def robot(self):
-        return self.kin.description
-
-    def partner_to_base(self, points) -> np.ndarray:
-        return self.placement.apply(points)
-
-    def person1_to_base(self, points) -> np.ndarray:
-        p = np.asarray(points, dtype=float) @ _yaw(self.config.person1_yaw).T
-        return self.placement.apply(p + np.asarray(self.config.person1_xyz))
-
-    def person1_to_world(self, points) -> np.ndarray:
-        return self.robot.base_to_world().apply_array(self.person1_to_base(points))
-
-    def person1_pose(self) -> tuple:
-        """Where person 1 stands in the mocap frame: their body frame's origin (3,) and the
-        yaw of its x axis (rad)."""
-        origin = self.person1_to_world(np.zeros((1, 3)))[0]
-        forward = self.person1_to_world(np.array([[1.0, 0.0, 0.0]]))[0] - origin
-        return origin, math.atan2(forward[1], forward[0])
+# The arm in the partner's place of this scenario (its config an InteractionsConfig).
+Scene = PartnerPlace
 
 
 def scene(robot=None, config: InteractionsConfig = None, train=None) -> Scene:
     """The arm ``robot`` (a shipped name, a description file or a RobotKinematics) in the
     partner's place, scaled for the partner hands of ``train`` (default: the training split)."""
-    from mixture_ip_ros.robot.kinematics import RobotKinematics
     config = config or load_config()
-    kin = robot if isinstance(robot, RobotKinematics) else RobotKinematics(robot)
     train = nuisi.recordings(config.data, 'train') if train is None else train
-    unscaled = retarget.Placement(config.partner_shoulder, tuple(retarget.shoulder(kin)),
-                                  config.partner_yaw)
-    hands = np.concatenate([h[ok] for h, ok in (_hands(r, 2, config.data) for r in train)])
-    scale = retarget.reach_scale(kin, unscaled.offsets(hands), config.reach_margin)
-    return Scene(config, kin, retarget.Placement(unscaled.body_shoulder, unscaled.arm_shoulder,
-                                                 unscaled.yaw, scale))
+    return partner_place.place(robot, config, [h[ok] for h, ok in
+                                               (_hands(r, 2, config.data) for r in train)])
 
 
 # ------------------------------------------------------------------------------ replays
@@ -312,37 +223,18 @@ def person1_stream(recording, scene: Scene) -> tuple:
     return np.arange(len(xyz)) / recording.rate, scene.person1_to_world(xyz)
 
 
-def _lowpass(xyz: np.ndarray, rate: float, cutoff: float) -> np.ndarray:
-    """A path (n, 3) low-passed at ``cutoff`` Hz (second-order Butterworth, forward and back:
-    no lag); NaN rows (the tracker's glitches) are bridged linearly between the valid samples
-    first, so the glitch positions are never targets."""
-    from scipy.signal import butter, filtfilt
-    ok = ~np.isnan(xyz).any(axis=1)
-    idx = np.arange(len(xyz))
-    filled = np.column_stack([np.interp(idx, idx[ok], xyz[ok, j]) for j in range(3)])
-    if cutoff >= rate / 2 or len(xyz) < 10:
-        return filled
-    b, a = butter(2, cutoff / (rate / 2))
-    return filtfilt(b, a, filled, axis=0)
-
-
 def arm_interaction(recording, scene: Scene) -> GeneratedDemo:
     """One recording with the arm in the partner's place, on the replay's time base: person 1's
     stream (mocap frame) and the arm's joints following the partner's hand (low-passed) within
-    ``speed_fraction`` of the arm's speed limits (robot.retarget.joint_path).
+    ``speed_fraction`` of the arm's speed limits (PartnerPlace.joint_path).
     ``onset``/``end`` are the recording's first and last frames; ``extra`` holds the partner's
     hand in the base frame ('partner', NaN where the tracker lost it) and the flange's distance
     from it ('lag', m: the arm's lag where the hand is faster, and what is out of reach)."""
-    config, kin = scene.config, scene.kin
+    kin = scene.kin
     t, person1 = person1_stream(recording, scene)
     _, partner = partner_hand(recording, scene)
-    path = retarget.joint_path(kin, _lowpass(partner, recording.rate, config.lowpass_hz),
-                               1.0 / recording.rate, kin.description.home_array(),
-                               speed_limit=config.speed_fraction * kin.velocity_limit,
-                               posture_weight=config.posture_weight,
-                               limit_margin=config.limit_margin)
-    q = path.q
-    before, _ = replay_frames(recording, config)
+    q = scene.joint_path(partner, recording.rate).q
+    before, _ = replay_frames(recording, scene.config)
     last = np.flatnonzero(~np.isnan(partner).any(axis=1))[-1]
     return GeneratedDemo(
         name=recording.name, label=recording.label, wrist_t=t, wrist_xyz=person1, joint_t=t,

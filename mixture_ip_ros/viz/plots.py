@@ -429,29 +429,38 @@ def errors_vs_fraction(path, fractions, errors, title, ylabel):
     save_figure(fig, path)
 
 
-def partner_paths(path, examples, scale=100.0):
+def partner_paths(path, examples, scale=100.0, unit='cm', dof_names=None):
     """Predicted against recorded controlled agent, one row per example (one recording per
     interaction): (demonstration, rows predicted, prediction (m, Q), name of the component),
-    each DOF against time; the observed agent's recorded path beside it."""
+    each DOF against time; the observed agent's recorded path beside it. ``scale`` turns the
+    DOFs into ``unit`` (the y axes' unit); ``dof_names`` (observed names, controlled names)
+    name the DOFs' colours in the key (default: DOF 1, DOF 2, ...)."""
     if not examples:
         return
     Q = examples[0][0].n_controlled_dofs
     P = examples[0][0].n_observed_dofs
+    observed_names, controlled_names = dof_names or (
+        [f'DOF {j + 1}' for j in range(P)], [f'DOF {j + 1}' for j in range(Q)])
     fig, axes = plt.subplots(len(examples), 2, figsize=(11, 2.3 * len(examples)),
                              constrained_layout=True, squeeze=False)
     for r, (demo, rest, pred, chosen) in enumerate(examples):
         ax_o, ax_c = axes[r]
         for j in range(P):
-            ax_o.plot(demo.t, scale * demo.observed[:, j], color=f'C{j}', lw=1)
+            ax_o.plot(demo.t, scale * demo.observed[:, j], color=f'C{j}', lw=1,
+                      label=observed_names[j] if r == 0 else None)
         ax_o.axvspan(demo.t[0], demo.t[rest[0]] if len(rest) else demo.t[-1], color='0.9')
-        ax_o.set_ylabel(f'{demo.label}\nobserved', fontsize=8)
+        ax_o.set_ylabel(f'{demo.label}\nobserved [{unit}]', fontsize=8)
         for j in range(Q):
             ax_c.plot(demo.t, scale * demo.controlled[:, j], color=f'C{j}', lw=1,
-                      label='recorded' if j == 0 else None)
-            ax_c.plot(demo.t[rest], scale * pred[:, j], color=f'C{j}', lw=2, ls='--',
-                      label=f'predicted ({chosen})' if j == 0 else None)
+                      label=controlled_names[j] if r == 0 else None)
+            ax_c.plot(demo.t[rest], scale * pred[:, j], color=f'C{j}', lw=2, ls='--')
+        ax_c.plot([], [], color='k', lw=1, label='recorded')
+        ax_c.plot([], [], color='k', lw=2, ls='--', label=f'predicted ({chosen})')
         ax_c.axvspan(demo.t[0], demo.t[rest[0]] if len(rest) else demo.t[-1], color='0.9')
-        ax_c.legend(fontsize=7, loc='upper right')
+        ax_c.set_ylabel(f'controlled [{unit}]', fontsize=8)
+        ax_c.legend(fontsize=7, loc='center left', bbox_to_anchor=(1.01, 0.5))
+    axes[0, 0].legend(fontsize=7, loc='center left', bbox_to_anchor=(1.01, 0.5),
+                      title='colour', title_fontsize=7)
     axes[0, 0].set_title('observed agent (grey: the part observed)', fontsize=9)
     axes[0, 1].set_title('controlled agent: recorded (solid) and predicted (dashed)',
                          fontsize=9)

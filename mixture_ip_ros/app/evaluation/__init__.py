@@ -5,7 +5,9 @@ metrics.json, one module per scenario over the pieces they share (common, baseli
 - phase, missing_data (letters): thesis 4.3.1 and 4.3.2 on generated letters;
 - gestures (gestures): real human motion of one agent, PickupGestureWiimoteZ;
 - interactions (interactions): real two-person interactions, NuiSI v1 and v2; and any folder of
-  labelled CSV recordings (:func:`evaluate_csv`).
+  labelled CSV recordings (:func:`evaluate_csv`);
+- a trained model file scored on labelled CSV recordings without retraining
+  (:func:`evaluate_model_csv`, trained_model).
 
 Every scenario measures the model ``training.train`` ships for its training demonstrations.
 """
@@ -24,12 +26,13 @@ from mixture_ip_ros.io.files import write_text_atomic
 
 SCENARIOS = ('box_assembly', 'pole', 'phase', 'missing_data', 'gestures', 'interactions')
 
-__all__ = ['SCENARIOS', 'EvalConfig', 'evaluate', 'evaluate_csv', 'subsampled']
+__all__ = ['SCENARIOS', 'EvalConfig', 'evaluate', 'evaluate_csv', 'evaluate_model_csv',
+           'subsampled']
 
 
 def evaluate(scenario: str, out_dir: Path, seed: int = 0, quick: bool = False, *,
              bag_dir: Optional[Path] = None, demos: Optional[list] = None,
-             config: Optional[EvalConfig] = None, robot=None) -> dict:
+             config: Optional[EvalConfig] = None, robot=None, progress=None) -> dict:
     """Run one scenario's experiments; write PNGs and ``metrics.json`` into ``out_dir``.
 
     box_assembly and pole learn from generated demonstrations (``seed``), or from ``bag_dir`` (a
@@ -38,7 +41,8 @@ def evaluate(scenario: str, out_dir: Path, seed: int = 0, quick: bool = False, *
     (``quick`` picks smaller ones: fewer K candidates, folds, basis functions and time steps).
     ``robot`` (box_assembly and pole): the arm the demonstrations are for, a shipped name or a
     description file (None: the iiwa 14); it generates them, reads the bags' joints and gives
-    the hand positions.
+    the hand positions. ``progress(line)``: told as each fold of a cross-validated scenario
+    (interactions) ends.
     """
     if scenario not in SCENARIOS:
         raise ValueError(f'unknown scenario {scenario!r}; known: {list(SCENARIOS)}')
@@ -90,7 +94,8 @@ def evaluate(scenario: str, out_dir: Path, seed: int = 0, quick: bool = False, *
         from mixture_ip_ros.app.evaluation.interactions import (evaluate_nuisi,
                                                                 interactions_config)
         out_dir.mkdir(parents=True, exist_ok=True)
-        metrics = evaluate_nuisi(out_dir, config or interactions_config(quick), seed)
+        metrics = evaluate_nuisi(out_dir, config or interactions_config(quick), seed,
+                                 progress=progress)
         source = 'NuiSI v1 and v2'
     else:
         from mixture_ip_ros.app.evaluation.letters import (evaluate_missing_data,
@@ -110,14 +115,54 @@ def evaluate(scenario: str, out_dir: Path, seed: int = 0, quick: bool = False, *
 
 def evaluate_csv(csv_dir, labels: dict, layout, out_dir: Path, time_column: str = 't',
                  seed: int = 0, quick: bool = False, config: Optional[EvalConfig] = None,
-                 translation=()) -> dict:
+                 translation=(), progress=None) -> dict:
     """The interactions' cross-validated metrics and baselines on your own labelled
     recordings: a folder of CSV demonstrations (io.csv_files, any numbers of observed and
     controlled DOFs named by ``layout``) and ``labels`` {file stem or name: label}. Errors are in
     cm when every controlled DOF is in metres, else in the DOFs' own unit. ``translation``:
     the model's translation groups (core.patterns.translation_for), which the nearest-neighbour
-    baseline is given too."""
+    baseline is given too. ``progress(line)``: told as each fold ends."""
     from mixture_ip_ros.app.evaluation.interactions import evaluate_labelled, interactions_config
+    demos = _labelled_csv(csv_dir, labels, layout, time_column)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    cm = bool(layout.controlled) and all(u == 'm' for u in layout.controlled_units)
+    config = config or interactions_config(quick)
+    if translation:
+        config = replace(config, model={**config.model, 'translation': tuple(translation)})
+    metrics = evaluate_labelled(demos, out_dir, config, 'csv', seed, cm=cm, progress=progress,
+                                dof_names=(layout.observed, layout.controlled))
+    return _write(out_dir, {'scenario': 'csv', 'seed': int(seed), 'source': str(csv_dir),
+                            **metrics, 'runtime_s': round(time.perf_counter() - t0, 2)})
+
+
+def evaluate_model_csv(model_path, csv_dir, labels: dict, out_dir: Optional[Path] = None, *,
+                       observed=None, controlled=None, observed_units=None,
+                       controlled_units=None, time_column: str = 't', progress=None) -> dict:
+    """A trained model file scored on a folder of labelled CSV recordings without retraining
+    (trained_model.evaluate_model): the columns named by ``observed`` / ``controlled`` (one per
+    DOF of the model; None: the model's own names), the units the model's. Errors are in cm
+    when every controlled DOF is in metres. ``metrics.json`` goes to ``out_dir`` if given."""
+    from mixture_ip_ros.app.evaluation.trained_model import evaluate_model, model_columns
+    from mixture_ip_ros.io.model_file import load_model
+    t0 = time.perf_counter()
+    model, meta = load_model(model_path)
+    layout = model_columns(meta, observed, controlled, observed_units, controlled_units)
+    demos = _labelled_csv(csv_dir, labels, layout, time_column)
+    cm = bool(layout.controlled) and all(u == 'm' for u in layout.controlled_units)
+    metrics = {'model': str(model_path), 'source': str(csv_dir),
+               **evaluate_model(model, demos, cm=cm, progress=progress),
+               'runtime_s': round(time.perf_counter() - t0, 2)}
+    if out_dir is None:
+        return jsonable(metrics)
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    return _write(Path(out_dir), metrics)
+
+
+def _labelled_csv(csv_dir, labels: dict, layout, time_column: str) -> list:
+    """The CSV recordings of ``csv_dir`` (io.csv_files), each with its label from ``labels``
+    (file name or stem -> label); ValueError naming the first recording without one."""
     from mixture_ip_ros.io.csv_files import load_csv_dataset
     demos = load_csv_dataset(csv_dir, layout, time=time_column)
     missing = [d.name for d in demos if labels.get(d.name, labels.get(Path(d.name).stem)) is None]
@@ -126,16 +171,7 @@ def evaluate_csv(csv_dir, labels: dict, layout, out_dir: Path, time_column: str 
                          'labels file maps every CSV file (name or stem) to its label')
     for d in demos:
         d.label = str(labels.get(d.name, labels.get(Path(d.name).stem)))
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-    cm = bool(layout.controlled) and all(u == 'm' for u in layout.controlled_units)
-    config = config or interactions_config(quick)
-    if translation:
-        config = replace(config, model={**config.model, 'translation': tuple(translation)})
-    metrics = evaluate_labelled(demos, out_dir, config, 'csv', seed, cm=cm)
-    return _write(out_dir, {'scenario': 'csv', 'seed': int(seed), 'source': str(csv_dir),
-                            **metrics, 'runtime_s': round(time.perf_counter() - t0, 2)})
+    return demos
 
 
 def _write(out_dir: Path, metrics: dict) -> dict:

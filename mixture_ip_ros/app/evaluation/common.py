@@ -37,7 +37,9 @@ class EvalConfig:
     > 1 holds out only every stride-th demonstration (each model is still trained on all the
     others); ``subsample`` keeps every n-th time step of every demonstration;
     ``train_fraction`` < 1 (labelled recordings, app.evaluation.interactions) trains each fold
-    on that share of its training recordings of every label (seeded), tested on all held out.
+    on that share of its training recordings of every label (seeded), tested on all held out;
+    ``labelled_per_class`` > 0 (the same) gives the mixture with K chosen the labels of that
+    many training recordings of every label (seeded), the others unlabelled: semi-supervised.
     """
 
     candidates: Sequence[int] = tuple(range(1, 7))
@@ -49,6 +51,7 @@ class EvalConfig:
     min_interval: float = 0.05
     classes: Optional[Sequence[str]] = None       # a subset of the classes (gestures only)
     train_fraction: float = 1.0
+    labelled_per_class: int = 0
 
     def to_dict(self):
         d = asdict(self)

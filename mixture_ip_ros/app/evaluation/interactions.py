@@ -20,17 +20,24 @@ calibrated), labels only name its components afterwards (majority). Per fold:
   interactions (``true_k_accuracy_by_fraction``); for the model with K chosen, the interaction
   recognised with the phase known (eq. 11 with alpha = 1/T and p(alpha | k), on the samples the
   estimator absorbs: ``phase_known_accuracy_by_fraction``), so that what the online estimator
-  loses to the unknown phase shows apart from what the clustering loses, and the online
-  accuracy per interaction (``recognition_accuracy_by_interaction``);
+  loses to the unknown phase shows apart from what the clustering loses, the online
+  accuracy per interaction (``recognition_accuracy_by_interaction``) and, at half the movement
+  and at its end, which interaction was recognised for which (counts:
+  ``recognition_confusion_by_fraction``);
 - baselines on the same folds: k-means and a GaussianMixture on the resampled paths of both
   agents with the true number of interactions (ARI), and the nearest training recording by
   open-end DTW on the observed prefix (its interaction; its partner path, time-scaled).
 Numbers are means over the held-out recordings of all folds (ARIs: over the folds).
+
+With ``EvalConfig.labelled_per_class`` > 0 the mixture with K chosen is given the labels of that
+many training recordings of every interaction (semi-supervised: training.train with labels for
+some) and ``unlabelled_ari`` is its ARI on the other training recordings; the model with K the
+number of interactions stays unsupervised.
 """
 
 from __future__ import annotations
 
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from functools import partial
 from multiprocessing import get_context
 import os
@@ -42,11 +49,14 @@ import numpy as np
 from mixture_ip_ros.app.evaluation.baselines import NearestNeighbour, clustering_baselines
 from mixture_ip_ros.app.evaluation.common import (EvalConfig, majority_labels,
                                                   phase_known_components, trained)
+from mixture_ip_ros.app.naming import named_components
 from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.core.playback import observed_rows, prefix_predictions, rest_rows
 from mixture_ip_ros.viz import plots
 
 FRACTIONS = (0.3, 0.5, 0.7, 1.0)
+# Where the confusion tables are read: half the movement, and all of it.
+CONFUSION_FRACTIONS = (0.5, 1.0)
 N_FOLDS = 5
 METHODS = ('mixture', 'single', 'supervised', 'true_k', 'nearest', 'phase_known')
 
@@ -82,6 +92,24 @@ def kept_share(rows, labels, fraction: float, seed: int) -> np.ndarray:
         n = min(len(members), max(2, int(round(fraction * len(members)))))
         keep.append(rng.choice(members, n, replace=False))
     return np.sort(np.concatenate(keep))
+
+
+def named_share(rows, labels, n: int, seed: int) -> np.ndarray:
+    """``n`` of ``rows`` of every label (all of a label with fewer), drawn with ``seed``;
+    sorted."""
+    rng = np.random.default_rng(seed)
+    out = [rng.choice(members, min(n, len(members)), replace=False)
+           for lbl in sorted(set(labels[rows].tolist()), key=str)
+           for members in [rows[labels[rows] == lbl]]]
+    return np.sort(np.concatenate(out))
+
+
+def confusion(truth, said, classes) -> dict:
+    """{true label: {recognised label: count}}: every one of ``classes`` a row, every label
+    recognised a column (the classes, then any other name a component has), zeros kept."""
+    said = np.asarray(said, dtype=object)
+    columns = list(classes) + sorted({str(s) for s in said if s is not None} - set(classes))
+    return {c: {s: int(np.sum((truth == c) & (said == s))) for s in columns} for c in classes}
 
 
 def _ari(a, b) -> float:
@@ -137,8 +165,14 @@ def _fold(demos, labels, fold, config: EvalConfig, seed: int, f: int) -> dict:
     if config.train_fraction < 1:
         train_i = kept_share(train_i, labels, config.train_fraction, seed + f)
     train = [demos[i] for i in train_i]
+    # The mixture's labels: none, or a few training recordings of every interaction named.
+    fit_labels = None
+    if config.labelled_per_class:
+        named = set(named_share(train_i, labels, config.labelled_per_class, seed + f).tolist())
+        fit_labels = [labels[i] if i in named else None for i in train_i]
     shape = (len(test_i), len(fractions))
     right = {m: np.zeros(shape, dtype=bool) for m in METHODS}
+    said = np.empty(shape, dtype=object)          # the interaction the mixture recognised
     rms = {m: np.full(shape, np.nan) for m in METHODS}
     final = {m: np.full(shape, np.nan) for m in METHODS}
     contact = {m: np.full(shape, np.nan) for m in METHODS}
@@ -149,14 +183,15 @@ def _fold(demos, labels, fold, config: EvalConfig, seed: int, f: int) -> dict:
     # One thread per fold's training: the folds already fill the cores, a process each
     # (run_in_processes).
     fit = partial(trained, train, config, n_jobs=1)
-    model, info = fit(random_state=seed)
+    model, info = fit(random_state=seed, labels=fit_labels)
     single, _ = fit(n_components=1)
     supervised, _ = fit(labels=labels[train_i])
     # Training with K given fits what training with K chosen fits once it chose that K.
-    true_k = (model if info['n_components'] == len(classes) else
+    true_k = (model if info['n_components'] == len(classes) and fit_labels is None else
               fit(n_components=len(classes), random_state=seed)[0])
     timings['training_s'] = time.perf_counter() - t0
-    names = majority_labels(model, train)
+    names = (majority_labels(model, train) if fit_labels is None
+             else named_components(model, train))
     comp_train = np.argmax(model.resp_, axis=1)
     heldout = [int(np.argmax(model.component_posterior(
         demos[i].phase[ok], demos[i].observed[ok], alpha=1.0 / demos[i].duration)))
@@ -175,6 +210,7 @@ def _fold(demos, labels, fold, config: EvalConfig, seed: int, f: int) -> dict:
                     prefix_predictions(est, demos[i], fractions)):
                 right[m][r, c] = nm[k] == labels[i]
                 if m == 'mixture':
+                    said[r, c] = nm[k]
                     # against the recording's own progress t / T at the prefix's end
                     phase_error[r, c] = fractions[c] * abs(alpha * demos[i].duration - 1.0)
                 if pred is not None and has_partner:
@@ -208,9 +244,12 @@ def _fold(demos, labels, fold, config: EvalConfig, seed: int, f: int) -> dict:
                'component_labels': names,
                'baseline_kmeans_ari': clustering['kmeans'],
                'baseline_gmm_pca_ari': clustering['gmm_pca']}
-    return {'rows': test_i, 'right': right, 'rms': rms, 'final': final, 'contact': contact,
-            'phase_error': phase_error, 'fold': summary, 'examples': examples,
-            'timings': timings}
+    if fit_labels is not None:
+        free = np.array([lbl is None for lbl in fit_labels])
+        summary['unlabelled_ari'] = _ari(labels[train_i][free], comp_train[free])
+    return {'rows': test_i, 'right': right, 'said': said, 'rms': rms, 'final': final,
+            'contact': contact, 'phase_error': phase_error, 'fold': summary,
+            'examples': examples, 'timings': timings}
 
 
 def fold_tasks(demos, config: EvalConfig, seed: int) -> list:
@@ -226,35 +265,64 @@ def fold_tasks(demos, config: EvalConfig, seed: int) -> list:
     return [partial(_fold, demos, labels, fold, config, seed, f) for f in range(N_FOLDS)]
 
 
-def run_in_processes(tasks) -> list:
-    """The tasks' results in order, one process per core. Each task is pickled to its worker
-    with its recordings. The workers are forked from a server process that imported this
+def run_in_processes(tasks, on_done=None) -> list:
+    """The tasks' results in order, one process per core; ``on_done(done, total, index,
+    result)`` is called as each task ends (in the order they end). Each task is pickled to its
+    worker with its recordings. The workers are forked from a server process that imported this
     module and nothing else (multiprocessing's forkserver), not from the caller: a worker
     forked from a process that had run ROS nodes inherited their DDS threads' objects, and its
     garbage collector crashed it (a segmentation fault in the test suite). The estimator's
     kernels come compiled from numba's cache."""
+    on_done = on_done or (lambda done, total, index, result: None)
     workers = min(len(tasks), len(os.sched_getaffinity(0)))
     if workers <= 1:
-        return [task() for task in tasks]
+        results = []
+        for index, task in enumerate(tasks):
+            results.append(task())
+            on_done(index + 1, len(tasks), index, results[-1])
+        return results
     context = get_context('forkserver')
     context.set_forkserver_preload([__name__])
     with ProcessPoolExecutor(workers, mp_context=context) as pool:
-        return [job.result() for job in [pool.submit(task) for task in tasks]]
+        jobs = {pool.submit(task): index for index, task in enumerate(tasks)}
+        for done, job in enumerate(as_completed(jobs), 1):
+            on_done(done, len(tasks), jobs[job], job.result())
+        return [job.result() for job in jobs]
+
+
+def fold_progress(progress, names):
+    """:func:`run_in_processes`'s ``on_done`` for folds of :func:`fold_tasks` that say how each
+    went on ``progress(line)`` (None: nothing shown); ``names``: the data set of each task."""
+    if progress is None:
+        return None
+
+    def on_done(done, total, index, result):
+        seconds = sum(result['timings'].values())
+        progress(f'{names[index]}: fold {index % N_FOLDS + 1} of {N_FOLDS} done '
+                 f'({done}/{total}): K = {result["fold"]["n_components"]}, '
+                 f'{len(result["rows"])} held out, {seconds:.0f} s')
+    return on_done
 
 
 def evaluate_labelled(demos, out_dir: Path, config: EvalConfig = None, name: str = 'recordings',
-                      seed: int = 0, cm: bool = True) -> dict:
+                      seed: int = 0, cm: bool = True, progress=None, *,
+                      dof_names=None) -> dict:
     """The cross-validated metrics of the module docstring for labelled Demonstrations (any
     numbers of observed and controlled DOFs; partner errors need a controlled agent); plots
     go to ``out_dir`` prefixed with ``name``. ``cm``: errors reported in cm (the DOFs in
-    metres), else in the DOFs' own unit."""
+    metres), else in the DOFs' own unit. ``progress(line)``: told as each fold ends.
+    ``dof_names``: (observed names, controlled names) for the plots' colour keys."""
     config = config or interactions_config()
     demos = list(demos)
-    return fold_metrics(demos, run_in_processes(fold_tasks(demos, config, seed)), out_dir, config,
-                        name, cm)
+    tasks = fold_tasks(demos, config, seed)
+    if progress is not None:
+        progress(f'{name}: {N_FOLDS}-fold cross-validation of {len(demos)} recordings')
+    results = run_in_processes(tasks, fold_progress(progress, [name] * len(tasks)))
+    return fold_metrics(demos, results, out_dir, config, name, cm, dof_names=dof_names)
 
 
-def fold_metrics(demos, results, out_dir: Path, config: EvalConfig, name: str, cm: bool) -> dict:
+def fold_metrics(demos, results, out_dir: Path, config: EvalConfig, name: str, cm: bool, *,
+                 dof_names=None) -> dict:
     """:func:`evaluate_labelled`'s metrics and plots from its folds' results."""
     labels = np.array([d.label for d in demos])
     classes = sorted(set(labels.tolist()), key=str)
@@ -267,9 +335,11 @@ def fold_metrics(demos, results, out_dir: Path, config: EvalConfig, name: str, c
     final = {m: np.full((len(demos), len(fractions)), np.nan) for m in METHODS}
     contact = {m: np.full((len(demos), len(fractions)), np.nan) for m in METHODS}
     phase_error = np.full((len(demos), len(fractions)), np.nan)
+    said = np.empty((len(demos), len(fractions)), dtype=object)
     per_fold, examples = [], {}
     timings = {'training_s': 0.0, 'online_s': 0.0, 'baselines_s': 0.0}
     for r in results:
+        said[r['rows']] = r['said']
         for m in METHODS:
             right[m][r['rows']], rms[m][r['rows']] = r['right'][m], r['rms'][m]
             final[m][r['rows']] = r['final'][m]
@@ -303,8 +373,14 @@ def fold_metrics(demos, results, out_dir: Path, config: EvalConfig, name: str, c
         'recognition_accuracy_by_interaction': {
             c: {k: float(right['mixture'][labels == c, j].mean()) for j, k in enumerate(keys)}
             for c in classes},
+        'recognition_confusion_by_fraction': {
+            k: confusion(labels, said[:, j], classes) for j, k in enumerate(keys)
+            if any(abs(fractions[j] - f) < 1e-9 for f in CONFUSION_FRACTIONS)},
         'folds': per_fold,
     }
+    if per_fold and 'unlabelled_ari' in per_fold[0]:
+        # a few training recordings of every interaction named (EvalConfig.labelled_per_class)
+        metrics['unlabelled_ari'] = float(np.mean([p['unlabelled_ari'] for p in per_fold]))
     err_unit = 'cm' if cm else 'unit'
     if has_partner:
         metrics.update({
@@ -346,7 +422,8 @@ def fold_metrics(demos, results, out_dir: Path, config: EvalConfig, name: str, c
             f'{name}: the partner predicted over the rest of the interaction',
             f'RMS over the rest [{"cm" if cm else "DOF unit"}]')
         plots.partner_paths(out_dir / f'{name}_partner_paths.png',
-                            [examples[c] for c in classes if c in examples], scale=unit)
+                            [examples[c] for c in classes if c in examples], scale=unit,
+                            unit='cm' if cm else 'DOF unit', dof_names=dof_names)
         names_plot += [f'{name}_partner_error_vs_fraction.png', f'{name}_partner_paths.png']
     metrics['timings_s'] = {k: round(v, 2) for k, v in timings.items()}
     metrics['units'] = {'ari': 'adjusted Rand index, mean over folds',
@@ -359,7 +436,11 @@ def fold_metrics(demos, results, out_dir: Path, config: EvalConfig, name: str, c
                                    'after the observed fraction',
                         'phase_error': 'the estimated phase alpha* f T against the progress f '
                                        'at the prefix\'s end, mean absolute',
-                        'chance': 'the largest interaction share'}
+                        'chance': 'the largest interaction share',
+                        'confusion': 'held-out recordings (all folds) of each interaction '
+                                     '(rows) by the interaction the mixture recognised online '
+                                     'from that fraction of the movement (columns; a '
+                                     'component no interaction names: component_k)'}
     metrics['chance_accuracy'] = float(chance)
     metrics['config'] = config.to_dict()
     metrics['plots'] = names_plot
@@ -367,9 +448,10 @@ def fold_metrics(demos, results, out_dir: Path, config: EvalConfig, name: str, c
 
 
 def evaluate_nuisi(out_dir: Path, config: EvalConfig = None, seed: int = 0,
-                   versions=('v1', 'v2')) -> dict:
+                   versions=('v1', 'v2'), progress=None) -> dict:
     """NuiSI v1 and v2 (scenarios.nuisi): every recording of both upstream splits, person 1's
-    hand observed, person 2's controlled. {version: metrics} plus the source."""
+    hand observed, person 2's controlled. {version: metrics} plus the source.
+    ``progress(line)``: told as each fold ends."""
     from mixture_ip_ros.scenarios import nuisi
     config = config or interactions_config()
     sets = {v: nuisi.demonstrations(v, 'train') + nuisi.demonstrations(v, 'test')
@@ -377,7 +459,9 @@ def evaluate_nuisi(out_dir: Path, config: EvalConfig = None, seed: int = 0,
     # Every version's folds in one pool, the version with more samples first (its folds take
     # longest), so that the cores stay busy to the end.
     order = sorted(versions, key=lambda v: -sum(len(d.t) for d in sets[v]))
-    results = run_in_processes([t for v in order for t in fold_tasks(sets[v], config, seed)])
+    tasks = [t for v in order for t in fold_tasks(sets[v], config, seed)]
+    results = run_in_processes(tasks, fold_progress(
+        progress, [f'nuisi_{v}' for v in order for _ in range(N_FOLDS)]))
     out = {}
     for g, v in enumerate(order):
         out[v] = {'source': nuisi.SOURCE.format(version=v, commit=nuisi.VERSIONS[v].commit),

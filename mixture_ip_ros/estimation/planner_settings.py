@@ -1,0 +1,54 @@
+"""How the online planner (estimation.planner) commits, replans and plans: its settings,
+validated."""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class PlannerSettings:
+    """How the planner commits, replans and plans. ``replan_period`` is 1 / the replan rate;
+    ``backlog_slice``: held samples conditioned on per call after an onset;
+    ``max_clock_offset`` (s, 0 = no check): a plan resting on an observation stamped further
+    than this from the caller's clock is not sent (the observations are on another clock, and
+    the controller would wait for a start years away). ``hedge``: before the commit, once the
+    commit waits on confidence alone, send the plan with the component marginalised too
+    (estimation.plans.build_plan's ``hedged``), so that the robot is under way when the
+    interaction is recognised. ``max_joint_state_age``, ``max_wrist_silence`` (s, 0 = no
+    check): when the arm's state or the wrist stream is too old (estimation.stale_inputs)."""
+
+    confidence_threshold: float = 0.9
+    min_observations: int = 3
+    n_points: int = 25
+    lookahead: float = 0.1
+    settle_time: float = 0.5
+    hold_window: float = 2.5
+    backlog_slice: int = 8
+    replan_period: float = 0.1
+    replan_on_observation: bool = True
+    max_records: int = 1000
+    max_clock_offset: float = 0.0
+    hedge: bool = False
+    max_joint_state_age: float = 0.0
+    max_wrist_silence: float = 0.0
+
+    def __post_init__(self):
+        def need(ok, what):
+            if not ok:
+                raise ValueError(what)
+        need(0.0 < self.confidence_threshold <= 1.0,
+             f'confidence_threshold must be in (0, 1], got {self.confidence_threshold}')
+        for name, low in (('min_observations', 1), ('n_points', 2), ('backlog_slice', 1),
+                          ('max_records', 1)):
+            value = getattr(self, name)
+            need(int(value) == value and value >= low,
+                 f'{name} must be an integer >= {low}, got {value}')
+        need(np.isfinite(self.lookahead) and self.lookahead >= 0,
+             f'lookahead must be >= 0 s, got {self.lookahead}')
+        for name in ('settle_time', 'hold_window', 'replan_period'):
+            value = getattr(self, name)
+            need(np.isfinite(value) and value > 0, f'{name} must be > 0 s, got {value}')
+        for name in ('max_clock_offset', 'max_joint_state_age', 'max_wrist_silence'):
+            value = getattr(self, name)
+            need(np.isfinite(value) and value >= 0, f'{name} must be >= 0 s, got {value}')
