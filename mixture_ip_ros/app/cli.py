@@ -9,6 +9,7 @@ from mixture_ip_ros.app.cli_csv import OneList
 from mixture_ip_ros.app.cli_evaluate import add_evaluate_parser
 from mixture_ip_ros.app.cli_nodes import add_node_parsers
 from mixture_ip_ros.app.cli_options import add_robot, bounded, existing_file, new_file, out_dir
+from mixture_ip_ros.app.cli_run import add_run_parser
 from mixture_ip_ros.app.cli_train import add_train_parser
 from mixture_ip_ros.nodes.launch import set_process_defaults
 
@@ -114,6 +115,7 @@ def build_parser():
     i.set_defaults(func=_info)
 
     add_node_parsers(sub)
+    add_run_parser(sub)
     return p
 
 
