@@ -48,5 +48,6 @@ def generate_launch_description():
              condition=IfCondition(replay),
              parameters=[_params_file('bag_player.yaml'),
                          {'use_sim_time': True, 'rewrite_stamps': True,
-                          'topics': ['/mocap/wrist'], 'start_delay': 2.0, 'bag': bag}]),
+                          'topics': ['/mocap/wrist'], 'start_delay': 2.0,
+                          'wait_for_subscribers': 1, 'bag': bag}]),
     ])

@@ -257,3 +257,21 @@ def test_waiting_for_a_clock_that_never_comes_is_warned_about(harness, bag, capf
         return 'no /clock has come' in ''.join(seen)
     harness.spin_until(warned, what='the warning')
     assert pb.player.published == 0
+
+
+def test_waiting_for_a_subscriber_plays_the_bag_from_its_first_message_once_one_matches(
+        harness, bag):
+    """Messages published before a subscriber matches are lost to it: the player waits (and
+    says so) until every played topic has one, then plays from the bag's first message."""
+    path, t, xyz, _ = bag
+    player = harness.add(BagPlayer(context=harness.context, parameter_overrides=[
+        Parameter('bag', value=str(path)), Parameter('topics', value=['/mocap/wrist']),
+        Parameter('remap', value=['/mocap/wrist:=/unheard_wrist']),
+        Parameter('wait_for_subscribers', value=1), Parameter('clock_warning_period', value=0.05)]))
+    harness.spin_until(lambda: player._unheard() == ['/mocap/wrist'] and player.published == 0,
+                       what='the player waiting')
+    wrist = harness.subscribe(PoseStamped, '/unheard_wrist', DEEP_BEST_EFFORT)
+    harness.spin_until(lambda: player.finished, what='the end of the bag')
+    present = ~np.isnan(xyz).any(axis=1)
+    harness.spin_until(lambda: len(wrist) == present.sum(), what='every wrist message')
+    assert stamp_to_ns(wrist[0].header.stamp) == DEFAULT_START_TIME_NS

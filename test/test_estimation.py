@@ -627,6 +627,39 @@ def test_catch_up_keeps_the_path_after_the_arm_rejoins_it_and_never_divides_by_z
                      limits)
 
 
+def test_a_catch_up_plan_is_still_reachable_when_it_reaches_the_controller_late(trained):
+    """With a delivery margin, the point where an arm at rest rejoins its path is one the
+    controller's blend reaches within the limits also when the plan arrives up to the margin
+    after the present, as the sim's acceptance check sees it: no re-timing (delay 0) at any
+    arrival in [0, margin]; an arm on its path gets the same plan as without the margin."""
+    from mixture_ip_ros.robot.trajectory import points_from_arrays, validate_trajectory
+    model, est, t_now = _forty_observed(trained)
+    n = model.n_controlled_
+    free = build_plan(est, t_now, n_points=6)
+    limits = _limits(n, 1.0, 20.0)
+    robot = (free.positions[0] + 0.2, np.zeros(n))   # at rest, 0.2 rad away
+    edge = build_plan(est, t_now, n_points=6, robot=robot, limits=limits)
+    plan = build_plan(est, t_now, n_points=6, robot=robot, limits=limits, margin=0.05)
+    assert plan.times[0] > edge.times[0]
+    names = [f'j{i}' for i in range(n)]
+
+    def delay(p, arrival):
+        points = points_from_arrays(p.times - t_now, p.positions, p.velocities,
+                                    p.accelerations)
+        return validate_trajectory(names, points, t_now, t_now + arrival, names,
+                                   limits=limits, positions_now=robot[0],
+                                   velocities_now=robot[1], control_period=1e-3).delay
+    assert delay(edge, 0.05) > 0               # at the edge of reach: re-timed when late
+    for arrival in np.linspace(0.0, 0.05, 11):
+        assert delay(plan, arrival) == 0.0
+        assert _blend_ok(plan.times[0] - t_now - arrival, *robot, plan.positions[0],
+                         plan.velocities[0], limits)
+    _, q, qd, _ = est.expected_controlled([t_now])
+    on_path = _limits(n, 2 * np.abs(free.velocities).max(), 1e4)
+    near = build_plan(est, t_now, n_points=6, robot=(q[0], qd[0]), limits=on_path, margin=0.05)
+    assert np.array_equal(near.times, free.times)
+
+
 def test_plan_starts_from_the_present_when_observations_lag(trained):
     """The first point is lookahead ahead of the present (clock_now), not of the latest
     observation, when the two differ by a plausible processing lag; another clock is ignored."""

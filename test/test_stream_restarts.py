@@ -198,3 +198,22 @@ def test_a_clock_jumping_back_ends_the_interaction_and_the_next_one_starts_on_th
     assert len(planner.interactions) == 2 and planner.active
     assert planner.current.n_observations == planner.interactions[0].n_observations > 0
     assert sum(planner.counts.rejected.values()) == 0
+
+
+def test_a_clock_not_yet_running_refuses_no_plan_and_the_interaction_commits(estimator):
+    """Under simulated time a node's clock reads 0 until its first /clock (a replay publishing
+    its own clock, heard by the estimator after the observer): no time to judge the stamps
+    against, as for the observer, so no plan is refused as off the clock."""
+    est, demo = estimator
+    planner = OnlinePlanner(est, PlannerSettings(max_clock_offset=1.0))
+    planner.onset(START_NS)
+    problems = []
+    for i, (t, y) in enumerate(zip(demo.t, demo.observed)):
+        stamp = START_NS + int(round(t * 1e9))
+        now = 0 if i < 10 else stamp + 1_000_000
+        planner.observe(stamp, y, now_ns=now)
+        step = planner.replan(now)
+        problems += [] if step is None or step.problem is None else [(i, step.problem)]
+    assert problems == []
+    assert planner.counts.plan_refusals['off_clock'] == 0
+    assert planner.state == 'committed'

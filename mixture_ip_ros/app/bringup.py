@@ -25,8 +25,9 @@ PARAMS_FILES = {'sim_node': 'sim.yaml', 'observer_node': 'observer.yaml',
 # The launch file's arguments: the parameters a user chooses per run.
 LAUNCH_ARGUMENTS = ('model_path', 'robot', 'bag')
 # How a replayed bag is played into the loop: only the wrist, stamped on the simulated clock,
-# after 2 s in which the separate processes discover each other.
-BAG_PLAYER_PARAMETERS = {'rewrite_stamps': True, 'topics': ['/mocap/wrist'], 'start_delay': 2.0}
+# once the observer subscribes and 2 s more, in which the other nodes discover each other.
+BAG_PLAYER_PARAMETERS = {'rewrite_stamps': True, 'topics': ['/mocap/wrist'], 'start_delay': 2.0,
+                         'wait_for_subscribers': 1}
 # A belief line is printed when k* changes or its probability moved this much since the last.
 BELIEF_STEP = 0.1
 

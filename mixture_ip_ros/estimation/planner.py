@@ -390,7 +390,7 @@ class OnlinePlanner:
                           final_time=self._final_time, robot=self.robot_state,
                           limits=self.limits,
                           final_position=self._y_latest if final and not hedged else None,
-                          hedged=hedged)
+                          hedged=hedged, margin=s.delivery_margin)
         trigger = self._trigger_ns
         sendable, problem = self._checked(plan, t_plan, self._fresh_ns if final else trigger,
                                           now_ns)
@@ -458,7 +458,8 @@ class OnlinePlanner:
                 self.counts.plans_time_scaled += 1
                 plan = scaled
         offset = self._settings.max_clock_offset
-        if why is None and offset > 0 and now_ns is not None and \
+        # A clock at 0 is simulated time before its first /clock: no time to judge against.
+        if why is None and offset > 0 and now_ns and \
                 abs(fresh_ns - int(now_ns)) > round(offset * 1e9):
             kind = 'off_clock'
             why = (f'the observations are stamped {(fresh_ns - int(now_ns)) * 1e-9:+.3g} s '

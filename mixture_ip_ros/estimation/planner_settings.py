@@ -16,7 +16,12 @@ class PlannerSettings:
     commit waits on confidence alone, send the plan with the component marginalised too
     (estimation.plans.build_plan's ``hedged``), so that the robot is under way when the
     interaction is recognised. ``max_joint_state_age``, ``max_wrist_silence`` (s, 0 = no
-    check): when the arm's state or the wrist stream is too old (estimation.stale_inputs)."""
+    check): when the arm's state or the wrist stream is too old (estimation.stale_inputs).
+    ``delivery_margin`` (s): a plan reaches the controller this long after the present it was
+    timed from, at most (the node clock steps with /clock, every 10 ms of the sim, and a plan
+    that catches up takes some ms to compute): where the arm catches up, its first point is
+    one it still reaches within its limits from then (estimation.plans.build_plan's
+    ``margin``), so that the controller need not re-time it."""
 
     confidence_threshold: float = 0.9
     min_observations: int = 3
@@ -32,6 +37,7 @@ class PlannerSettings:
     hedge: bool = False
     max_joint_state_age: float = 0.0
     max_wrist_silence: float = 0.0
+    delivery_margin: float = 0.05
 
     def __post_init__(self):
         def need(ok, what):
@@ -49,6 +55,7 @@ class PlannerSettings:
         for name in ('settle_time', 'hold_window', 'replan_period'):
             value = getattr(self, name)
             need(np.isfinite(value) and value > 0, f'{name} must be > 0 s, got {value}')
-        for name in ('max_clock_offset', 'max_joint_state_age', 'max_wrist_silence'):
+        for name in ('max_clock_offset', 'max_joint_state_age', 'max_wrist_silence',
+                     'delivery_margin'):
             value = getattr(self, name)
             need(np.isfinite(value) and value >= 0, f'{name} must be >= 0 s, got {value}')

@@ -117,7 +117,7 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
                settle_time: float = 0.5, component: Optional[int] = None,
                alpha: Optional[float] = None, final_time: Optional[float] = None,
                robot=None, limits=None, final_position=None,
-               hedged: bool = False) -> Plan:
+               hedged: bool = False, margin: float = 0.0) -> Plan:
     """The plan from ``t_now`` (s since onset) on, for ``component`` (default: the MAP one),
     the phase speed marginalised, or at phase speed ``alpha`` if given.
 
@@ -130,6 +130,12 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
     earliest time on the path that the blend reaches within them (to CATCH_UP_RESOLUTION), so
     the arm rejoins the path as soon as it can. If no point is reachable, the plan is the last
     point, timed when the blend can reach it. Without them, every point is kept.
+    ``margin`` (s): the controller takes the plan up to this long after ``t_now`` (its
+    delivery), so where the arm catches up the point it rejoins the path at, and a final
+    plan's point, is one that a blend starting that late, from the arm's state carried on at
+    its present speed, reaches within the limits too (else the final point is timed when it
+    does): a point at the very edge of reach would be re-timed by the controller for the few
+    ms the plan took to arrive.
     ``final_position``: the human's movement has ended here (the observer's 'end'): the plan is
     the single final posture conditioned on this final position at z = 1
     (``OnlineEstimator.predict_at_rest``).
@@ -192,17 +198,25 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
     if robot is not None and limits is not None:
         q, qd = (np.asarray(x, dtype=float) for x in robot)
 
-        def reachable(at, p, v):
+        def reachable(at, p, v, late=(0.0,)):
             # The plan's own speed is within_limits' to check (it slows a plan down); here only
             # whether the arm gets onto the path. A point due now or earlier is not reachable.
+            # ``late``: the blend starts this long after t_now (each of them) from the arm's
+            # state carried on; feasibility is not monotonic in the duration, hence several.
             T = np.asarray(at, dtype=float) - t_now
-            ok = T > 0
-            with np.errstate(divide='ignore', invalid='ignore'):
-                ok[ok] = blend_within_limits(T[ok], q, qd, p[ok], np.clip(
-                    v[ok], -limits.velocity, limits.velocity), BLEND, limits.velocity,
-                    limits.acceleration)
+            ok = T > max(late)
+            for d in late:
+                with np.errstate(divide='ignore', invalid='ignore'):
+                    ok[ok] = blend_within_limits(T[ok] - d, q + qd * d, qd, p[ok], np.clip(
+                        v[ok], -limits.velocity, limits.velocity), BLEND, limits.velocity,
+                        limits.acceleration)
             return ok
+        delivery = (0.0, 0.5 * margin, margin) if margin > 0 else (0.0,)
         ok = np.flatnonzero(reachable(times, pos, vel))
+        if margin > 0 and ok.size and (ok[0] > 0 or final):
+            # catching up, or the single final point: reached also when the plan comes late
+            late = np.flatnonzero(reachable(times, pos, vel, delivery))
+            ok = late if late.size or final else ok
         first = ok[0] if ok.size else len(times) - 1
         if first > 0:
             # The earliest time on the path the arm reaches in time, before that point; the
@@ -210,7 +224,8 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
             probe = np.arange(times[0], times[first] - 0.5 * CATCH_UP_RESOLUTION,
                               CATCH_UP_RESOLUTION)
             at = path(probe) if probe.size else None
-            hit = np.flatnonzero(reachable(probe, at[0], at[1])) if probe.size else probe
+            hit = (np.flatnonzero(reachable(probe, at[0], at[1], delivery)) if probe.size
+                   else probe)
             if hit.size:
                 i = hit[0]
                 keep = np.flatnonzero(times > probe[i] + 0.5 * CATCH_UP_RESOLUTION)
@@ -222,12 +237,11 @@ def build_plan(estimator, t_now: float, *, n_points: int = 25, lookahead: float 
                 first = 0
         phases, times, pos, vel, acc = (x[first:] for x in (phases, times, pos, vel, acc))
         if not ok.size:
-            reach = earliest_reach(q, qd, pos[0], np.clip(vel[0], -limits.velocity,
-                                                          limits.velocity),
-                                   BLEND, limits.velocity, limits.acceleration,
-                                   max(times[0] - t_now, 0.0))
+            reach = earliest_reach(q + qd * margin, qd, pos[0], np.clip(
+                vel[0], -limits.velocity, limits.velocity), BLEND, limits.velocity,
+                limits.acceleration, max(times[0] - t_now - margin, 0.0))
             if reach is not None:
-                times = np.r_[max(times[0], t_now + reach)]
+                times = np.r_[max(times[0], t_now + margin + reach)]
     return Plan(times=times, phases=phases, positions=pos, velocities=vel, accelerations=acc,
                 component=k, alpha=a, final=bool(final))
 

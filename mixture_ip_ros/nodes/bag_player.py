@@ -16,6 +16,9 @@ bag starts; without, the stamps (and /clock, with ``publish_clock``) jump back t
 start. Either is a new stream to the observer (estimation.observer), so each pass is a new
 interaction.
 
+Start: after ``start_delay`` s, counted once every played topic has ``wait_for_subscribers``
+matched subscriptions (and, under use_sim_time, the first /clock has come).
+
 Pacing: playback runs in its own thread that sleeps on the monotonic clock until each message is
 due (no busy wait). With ``use_sim_time`` the player follows the node's simulated clock instead
 (checked every 2 ms): it starts at the first /clock it receives and publishes each message when
@@ -93,10 +96,14 @@ class BagPlayerParameters:
     start_paused: bool = param(False, 'wait for resume() before the first message')
     start_delay: float = param(0.0, 's to wait before the first message (lets subscribers '
                                     'match)', low=0.0, high=3600.0)
+    wait_for_subscribers: int = param(0, 'before start_delay, wait until every played topic '
+                                         'has this many matched subscriptions (0: no wait)',
+                                      low=0, high=1000)
     queue_depth: int = param(10, 'history depth of the reliable publishers', low=1,
                              high=1_000_000)
-    clock_warning_period: float = param(5.0, 'use_sim_time: s of waiting for a first /clock '
-                                             'between warnings', low=0.001, high=3600.0)
+    clock_warning_period: float = param(5.0, 's of waiting for a first /clock (use_sim_time) '
+                                             'or for subscribers between warnings',
+                                        low=0.001, high=3600.0)
     topic_types: list = param([f'{WRIST_TOPIC}:={WRIST_TYPE}', f'{JOINT_TOPIC}:={JOINT_TYPE}'],
                               "topic:=pkg/msg/Type the bag's topics must have: a bag that "
                               'stores one of them as another type is refused')
@@ -249,21 +256,39 @@ class BagPlayer(Node):
                     return True
                 self._cond.wait(min(remaining, SIM_POLL) if self._sim_time else remaining)
 
+    def _unheard(self) -> list:
+        """The played topics with fewer than wait_for_subscribers matched subscriptions: a
+        best-effort wrist published before its observer matched would be lost, and with it the
+        rest before the first movement (separate processes take seconds to discover each
+        other on a loaded machine)."""
+        n = self.params.wait_for_subscribers
+        return [t for t, c in self.matched_subscriptions().items() if c < n]
+
     def _wait_to_start(self) -> bool:
-        """Wait while paused and, under use_sim_time, until /clock has been received (the clock
-        reads 0 before; a warning every clock_warning_period s). Returns False if asked to
-        stop."""
+        """Wait while paused, for wait_for_subscribers and, under use_sim_time, until /clock has
+        been received (the clock reads 0 before); a warning every clock_warning_period s.
+        Returns False if asked to stop."""
         warn_at = time.monotonic() + self.params.clock_warning_period
         with self._cond:
-            while self._paused or (self._sim_time and self.get_clock().now().nanoseconds == 0):
+            while True:
+                no_clock = self._sim_time and self.get_clock().now().nanoseconds == 0
+                unheard = self._unheard()
+                if not (self._paused or no_clock or unheard):
+                    break
                 if self._stop:
                     return False
-                self._cond.wait(SIM_POLL if self._sim_time else None)
-                if self._sim_time and not self._paused and time.monotonic() >= warn_at:
-                    warn_at = time.monotonic() + self.params.clock_warning_period
+                self._cond.wait(SIM_POLL if no_clock or unheard else None)
+                if self._paused or time.monotonic() < warn_at:
+                    continue
+                warn_at = time.monotonic() + self.params.clock_warning_period
+                if no_clock:
                     self.get_logger().warning(
                         'use_sim_time is true but no /clock has come: waiting for the '
                         'simulation (is sim_node running, on this domain?)')
+                if unheard:
+                    self.get_logger().warning(
+                        f'waiting for {self.params.wait_for_subscribers} subscriber(s) on '
+                        f'{unheard} (parameter wait_for_subscribers)')
         return not self._stop
 
     def _stamp_offset_ns(self) -> int:
