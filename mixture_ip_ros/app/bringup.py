@@ -20,6 +20,10 @@ import time
 from mixture_ip_ros.core.share import config_path
 
 NODES = ('sim_node', 'observer_node', 'estimator_node', 'bag_player')
+# The estimator's input from the observer (observation_topic's default), and how long the
+# player waits for the estimator to listen to it.
+OBSERVATION_TOPIC = '/observer/wrist'
+LISTEN_TIMEOUT = 30.0
 PARAMS_FILES = {'sim_node': 'sim.yaml', 'observer_node': 'observer.yaml',
                 'estimator_node': 'estimator.yaml', 'bag_player': 'bag_player.yaml'}
 # The launch file's arguments: the parameters a user chooses per run.
@@ -222,11 +226,21 @@ def run(model, robot: str, bag=None, live: bool = False, sim: bool = True, domai
     code = 0
     monitor = None
     try:
+        # The player starts once the estimator listens to the observer: a replay whose first
+        # samples reach the observer alone would make the first interaction start later than
+        # the same bag's next replay (bag_player's wait_for_subscribers covers the observer).
         for name, argv in commands:
-            children.start(name, argv)
+            if name != 'bag_player':
+                children.start(name, argv)
+        monitor = _Monitor(lines, say, int(env.get('ROS_DOMAIN_ID', '0')))
+        for name, argv in commands:
+            if name == 'bag_player':
+                if not monitor.wait_for_listener(OBSERVATION_TOPIC, children, LISTEN_TIMEOUT):
+                    say(f'the estimator is not listening on {OBSERVATION_TOPIC} after '
+                        f'{LISTEN_TIMEOUT:g} s: playing the bag anyway')
+                children.start(name, argv)
         say(f"started {', '.join(n for n, _ in commands)} on ROS domain "
             f"{env.get('ROS_DOMAIN_ID', '0')}; their logs are in {log_dir}")
-        monitor = _Monitor(lines, say, int(env.get('ROS_DOMAIN_ID', '0')))
         bag_done_at = None
         while True:
             monitor.spin_once(0.1)
@@ -294,6 +308,16 @@ class _Monitor:
 
     def spin_once(self, timeout: float) -> None:
         self.executor.spin_once(timeout_sec=timeout)
+
+    def wait_for_listener(self, topic: str, children, timeout: float) -> bool:
+        """Spin until a node subscribes to ``topic`` (True), a child exits or ``timeout`` s
+        pass (False)."""
+        deadline = time.monotonic() + timeout
+        while self.node.count_subscribers(topic) < 1:
+            if children.exited() or time.monotonic() > deadline:
+                return False
+            self.spin_once(0.05)
+        return True
 
     def close(self) -> None:
         import rclpy
