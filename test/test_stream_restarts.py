@@ -217,3 +217,19 @@ def test_a_clock_not_yet_running_refuses_no_plan_and_the_interaction_commits(est
     assert problems == []
     assert planner.counts.plan_refusals['off_clock'] == 0
     assert planner.state == 'committed'
+
+
+def test_a_clock_jumping_back_after_the_commit_ends_the_interaction_and_the_robot_holds(estimator):
+    """The arm moves on a committed plan when the simulated clock restarts: the next replan
+    returns the interaction's last Step, no plan and a hold, once; it is counted."""
+    est, demo = estimator
+    planner = OnlinePlanner(est, PlannerSettings(max_clock_offset=1.0))
+    planner.onset(START_NS)
+    _observed(planner, demo, START_NS)
+    assert planner.state == 'committed'
+    assert planner.tick(5 * 10**9)                      # a reset asks for a replan
+    step = planner.replan(5 * 10**9)
+    assert step is not None and step.hold and not step.send and step.plan is None
+    assert 'clock jumped back' in step.notice and 'holds' in step.notice
+    assert planner.current.end_reason == 'clock_reset' and planner.counts.clock_resets == 1
+    assert planner.replan(5 * 10**9 + 10**8) is None    # said once

@@ -180,7 +180,10 @@ class EventLines:
             return 'commit: ' + text[len('committed to '):]
         if text.startswith('switching from '):
             return 'switch: ' + text[len('switching from '):]
-        if text.startswith('interaction done') or text.startswith('interaction ended'):
+        # An interaction also ends without an 'end' event: its wrist gone silent, or the
+        # clock reset (estimation.planner: '...: the interaction ends').
+        if (text.startswith('interaction done') or text.startswith('interaction ended')
+                or ': the interaction ends' in text):
             self.results += 1
             return 'result: ' + text
         return None
@@ -265,11 +268,16 @@ def run(model, robot: str, bag=None, live: bool = False, sim: bool = True, domai
     except KeyboardInterrupt:
         say('interrupted')
     finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-        if monitor is not None:
-            monitor.close()
-        codes = children.stop()
+        # A second Ctrl-C or a SIGTERM while the children stop must not leave them running.
+        for sig in previous:
+            signal.signal(sig, signal.SIG_IGN)
+        try:
+            if monitor is not None:
+                monitor.close()
+            codes = children.stop()
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
         say('stopped: ' + ', '.join(f'{n} {c}' for n, c in codes.items()))
     return code
 

@@ -130,6 +130,7 @@ class OnlinePlanner:
         self._sent_component = None
         self._final_time = None   # time of the last final (at rest) plan's point
         self._clock = StreamClock()
+        self._ended = None        # the last Step of an interaction a clock reset ended
 
     # -- settings ---------------------------------------------------------------------
     @property
@@ -202,7 +203,7 @@ class OnlinePlanner:
             self._novelty.reset()
         self._schedule.restart()
         self._onset_ns = int(stamp_ns)
-        self._t_latest = self._y_latest = None
+        self._t_latest = self._y_latest = self._ended = None
         self._trigger_ns = self._onset_ns
         self._dirty = True
         self._sent_component = None
@@ -239,7 +240,8 @@ class OnlinePlanner:
         observation replanned for a period (a replan is due)."""
         self._watch_clock(now_ns)
         silent = self._silence(now_ns) is not None
-        return self._absorb_slice() or self._schedule.due_on_timer(now_ns) or silent
+        return (self._absorb_slice() or self._schedule.due_on_timer(now_ns) or silent
+                or self._ended is not None)
 
     def end(self, stamp_ns: int, now_ns: Optional[int] = None) -> Optional[Step]:
         """The human stopped (``stamp_ns``, dated back to when the hand came to rest): the last
@@ -248,7 +250,7 @@ class OnlinePlanner:
         stream stopped (estimation.stream_clock: a plan would start in the past; no error)."""
         self._watch_clock(now_ns)
         if not self.active:
-            return None
+            return self._take_ended()
         self._absorb_slice(len(self._backlog))
         t_end = (int(stamp_ns) - self._onset_ns) * 1e-9
         if np.isfinite(t_end) and t_end > self.t_now:
@@ -352,7 +354,7 @@ class OnlinePlanner:
         movement (s since onset), known with the observer's 'end': the component is then chosen
         with the phase known (:func:`end_summary`)."""
         if not self.active:
-            return None
+            return self._take_ended()
         silence = None if final else self._silence(now_ns)
         if silence is not None:
             return self._end_silent(silence)
@@ -471,9 +473,21 @@ class OnlinePlanner:
 
     def _watch_clock(self, now_ns: Optional[int]) -> None:
         """A clock jumping back by more than max_clock_offset (a simulated clock restarted)
-        ends the interaction in progress: what comes next is stamped on the new time."""
+        ends the interaction in progress: what comes next is stamped on the new time. The
+        next :meth:`replan` (or :meth:`end`) returns its last Step: no plan; a robot that moved
+        holds."""
         if self._clock.tick(now_ns, self._settings.max_clock_offset) and self.active:
+            moved = self.state == 'committed' or self.current.hedged_plans > 0
+            self.counts.clock_resets += 1
+            summary = posterior_summary(self.estimator, self.t_now)
             self._close('clock_reset', None)
+            self._ended = Step(summary, None, send=False, trigger_ns=self._trigger_ns,
+                               hold=moved, notice='the clock jumped back: the interaction ends'
+                               + (', the robot holds' if moved else ''))
+
+    def _take_ended(self) -> Optional[Step]:
+        step, self._ended = self._ended, None
+        return step
 
     def _close(self, reason: str, t_end: Optional[float]) -> None:
         self._backlog.clear()

@@ -102,6 +102,7 @@ class ObservationCounts:
     holds: int = 0                      # committed interactions stopped: unexplained movement
     stale_joint_states: int = 0         # spells of plans not sent: the arm's state too old
     silent_ends: int = 0                # interactions ended: no wrist observation for too long
+    clock_resets: int = 0               # interactions ended: the clock jumped back
 
     @property
     def n_rejected(self) -> int:

@@ -41,6 +41,7 @@ def estimation_values(planner, latency, plan_latency, events) -> dict:
         'holds_unexplained': counts.holds,
         'stale_joint_states': counts.stale_joint_states,
         'ends_wrist_silent': counts.silent_ends,
+        'ends_clock_reset': counts.clock_resets,
         'unexplained': rec and rec.unexplained,
         'plans_time_scaled': counts.plans_time_scaled,
         **{f'plans_refused_{k}': v for k, v in counts.plan_refusals.items()},

@@ -285,8 +285,8 @@ class SimNode(ManagedNode):
             start = (None if stamp_ns == 0
                      else self.sim.time + (stamp_ns - self._ros_now_ns()) * 1e-9)
             self.sim.set_trajectory(list(msg.joint_names), points, start)
-        except Exception as error:  # a bad message must never kill the node
-            self.sim.refuse(f'malformed trajectory: {error}')
+        except Exception as error:  # a bad message (or a failed graph query) never kills the node
+            self.sim.refuse(f'trajectory refused: {error!r}')
 
     # -- the command topic's publishers -----------------------------------------------
     def _check_graph(self) -> None:
