@@ -4,6 +4,9 @@ K = 3 components, M = 50 alpha hypotheses, 15 basis functions per DOF, 3 observe
 controlled DOFs: a stream of 1000 observations at 1 kHz along a demonstration, each update
 followed by the posterior query (as the estimator node does). Also in the same run:
 
+- ``switching``: the same stream with changes of mind allowed (``switch_rate`` SWITCH_RATE per
+  second, core.switching: the change points' segments beside the hypotheses since the onset),
+  its time and its median as a multiple of the exact update's in this run;
 - ``pruned``: the same stream with ``prune_below`` (hypotheses below it are dropped), its time,
   how many hypotheses are tracked at the end, the mass dropped, and the largest difference of
   its posterior from the exact one over the stream;
@@ -34,6 +37,7 @@ from mixture_ip_ros.core.warped import PhaseWarps  # noqa: E402
 from mixture_ip_ros.scenarios.synthetic import mixture_demos  # noqa: E402
 
 PRUNE_BELOW = 1e-12
+SWITCH_RATE = 0.3
 
 
 def naive_update_us(model, alphas, t, Y, reps):
@@ -129,6 +133,11 @@ def main():
     result['hypotheses'] = int(est.log_evidence.size)
     result['observed_weight_dim'] = int(est.n_observed * est.n_basis)
 
+    switching = OnlineEstimator(model, n_alpha=50, min_interval=0.0, switch_rate=SWITCH_RATE)
+    times = timed_updates(switching, t, y)
+    result['switching'] = {'switch_rate': SWITCH_RATE, **stats(times),
+                           'ratio_to_exact': float(np.median(times))
+                           / result['update_us_median']}
     pruned = OnlineEstimator(model, n_alpha=50, min_interval=0.0, prune_below=PRUNE_BELOW)
     joints = []
     times = timed_updates(pruned, t, y, lambda e: joints.append(e.joint_posterior()))

@@ -23,7 +23,8 @@ import sys
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / 'out' / 'results'
 BIN = Path(sys.executable).parent
-SCENARIOS = ('box_assembly', 'pole', 'phase', 'missing_data', 'gestures', 'interactions')
+SCENARIOS = ('box_assembly', 'pole', 'phase', 'missing_data', 'gestures', 'interactions',
+             'change_of_mind')
 ROBOTS = ('iiwa14', 'panda', 'ur5')
 DELAYS = (0.02, 0.05, 0.1)
 
@@ -75,6 +76,38 @@ def run(name, command, target) -> dict:
         result = json.loads(Path(target).read_text())
     path.write_text(json.dumps(result))
     return result
+
+
+def change_of_mind_section(c) -> list:
+    """`evaluate --scenario change_of_mind`: NuiSI recordings spliced into changes of mind."""
+    if not c:
+        return []
+
+    def delay(x):
+        return 'never' if x is None else f'{x:.2f} s'
+    L = ['## Changes of mind: NuiSI recordings spliced (5-fold cross-validation)', '',
+         'Every ordered pair of held-out recordings of different interactions, joined at 30-60 % '
+         'of the first (core.splice); the same model read with the switch rate training '
+         'calibrated and with rate 0 (a belief that never switches).', '',
+         '| | v1 switching | v1 never | v2 switching | v2 never |', '|---|---|---|---|---|']
+    rows = [('changes of mind', lambda x: str(x['splices'])),
+            ('followed (belief at the end)', lambda x: pct(x['followed'])),
+            ('settled after (median / 90 %)', lambda x: f"{delay(x['delay_s']['median'])} / "
+                                                        f"{delay(x['delay_s']['p90'])}"),
+            ('unchanged recognised, 30/50/70/100 %',
+             lambda x: fractions(x['unchanged_recognised']) + ' %'),
+            ('unchanged: belief changed after 30 %',
+             lambda x: pct(x['unchanged_late_changes'])),
+            ('partner at the end, changed / unchanged',
+             lambda x: f"{x['hand_error_end_cm']['spliced']:.1f} / "
+                       f"{x['hand_error_end_cm']['unchanged']:.1f} cm")]
+    for name, f in rows:
+        L.append(f'| {name} | ' + ' | '.join(f(c[v][m]) for v in ('v1', 'v2')
+                                              for m in ('switching', 'no_switch')) + ' |')
+    L.append('| switch rate per fold (1/s) | ' + ' | '.join(
+        ', '.join(f"{f['switch_rate']:g}" for f in c[v]['folds']) + ' | -'
+        for v in ('v1', 'v2')) + ' |')
+    return L + ['']
 
 
 def machine() -> str:
@@ -309,6 +342,7 @@ def page(R: dict) -> str:
         people = ' / '.join(f"{m['people_contact_distance_cm']:.1f}" for m in (v1, v2))
         L += [f'| {name.format(people=people + " cm")} | {f(v1)} | {f(v2)} |'
               for name, f in rows] + ['']
+    L += change_of_mind_section(R.get('evaluate_change_of_mind'))
     L += end_section(R.get('end_recognition'))
     L += robustness_section(R.get('robustness'), R.get('cpu_kernels'))
     demos = [(r, R.get(f'demo_{r}')) for r in ROBOTS]
@@ -384,8 +418,11 @@ def page(R: dict) -> str:
                      f"({e['hypotheses']} hypotheses, observed weights of dimension "
                      f"{e['observed_weight_dim']}): median {e['update_us_median']:.0f} us, 99th "
                      f"percentile {e['update_us_p99']:.0f} us ({e['pruned']['update_us_median']:.0f}"
-                     f" us once unlikely hypotheses are pruned); batch conditioning after 500 "
-                     f"observations {e['naive_us_m500'] / 1e6:.1f} s.")
+                     f" us once unlikely hypotheses are pruned"
+                     + (f"; {e['switching']['update_us_median']:.0f} us with changes of mind "
+                        f"({e['switching']['ratio_to_exact']:.2f}x)" if 'switching' in e else '')
+                     + f"); batch conditioning after 500 observations "
+                     f"{e['naive_us_m500'] / 1e6:.1f} s.")
         s = R.get('sim')
         if s:
             L.append(f"- `sim.py`: MuJoCo + Pinocchio controller {s['step_us_total']:.1f} us per "

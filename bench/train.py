@@ -6,7 +6,7 @@ model.npz` does: load the bags (load_s), then app.training.train_to_file with K 
 1..6 (train_s), its stages as training reports them (info['seconds']): the demonstrations
 prepared once (prepare_s), K by the pattern space's leave-one-out curve (patterns_s), the chosen
 K's covariance floor calibrated on held-out folds (heldout_s), both together selection_s, the
-speed weight (speed_s), the final fit (fit_s), the held-out choice of the phase (choice_s),
+speed weight (speed_s), the switch rate (switch_s), the final fit (fit_s), the held-out choice of the phase (choice_s),
 the phase warps if chosen (warps_s), the novelty calibration (novelty_s) and the save
 (save_s). n_fits counts every mixture fit, on any thread; peak_rss_mb is the run's peak
 resident memory. Top-level keys are medians over the runs (the machine may be shared).
@@ -41,11 +41,11 @@ from pathlib import Path
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 KEYS = ('train_s', 'load_s', 'prepare_s', 'selection_s', 'patterns_s', 'heldout_s', 'speed_s',
-        'novelty_s', 'fit_s', 'choice_s', 'warps_s', 'save_s', 'peak_rss_mb', 'n_fits')
+        'switch_s', 'novelty_s', 'fit_s', 'choice_s', 'warps_s', 'save_s', 'peak_rss_mb', 'n_fits')
 # The JSON's keys for training's stages (app.progress.Stages, info['seconds']).
 STAGES = {'prepare_s': 'preparing', 'patterns_s': 'choosing K', 'heldout_s': 'covariance floor',
-          'speed_s': 'speed weight', 'fit_s': 'final fit', 'choice_s': 'phase choice',
-          'warps_s': 'phase warps',
+          'speed_s': 'speed weight', 'switch_s': 'switch rate', 'fit_s': 'final fit',
+          'choice_s': 'phase choice', 'warps_s': 'phase warps',
           'novelty_s': 'novelty',
           'save_s': 'saving'}
 

@@ -31,6 +31,9 @@ def _demo(args):
     if args.scenario == 'interactions':
         from mixture_ip_ros.app.interactions import run
         run(args)
+    elif args.scenario == 'change_of_mind':
+        from mixture_ip_ros.app.change_of_mind import run
+        run(args)
     else:
         from mixture_ip_ros.app.demo import run_demo
         run_demo(args)
@@ -79,19 +82,23 @@ def build_parser():
     add_evaluate_parser(sub)
 
     d = sub.add_parser('demo', help='closed loop: bags -> observer -> estimator -> MuJoCo arm')
-    d.add_argument('--scenario', choices=['box_assembly', 'interactions'],
+    d.add_argument('--scenario', choices=['box_assembly', 'interactions', 'change_of_mind'],
                    default='box_assembly',
                    help="box_assembly: generated human-robot demonstrations; interactions: "
                         "NuiSI's two people, the arm in person 2's place, person 1's held-out "
-                        "recordings replayed (config/interactions.yaml)")
+                        "recordings replayed (config/interactions.yaml); change_of_mind: the "
+                        "box assembly's held-out reaches, then pairs of them spliced where the "
+                        "human turns from one part to another mid-reach")
     add_robot(d)
     d.add_argument('--data', default=None,
                    help='folder of demonstration bags, generated if missing (default: '
-                        'out/box_assembly_bags or out/interactions/bags for the iiwa14, '
-                        'out/<robot>/... for another robot)')
+                        'out/box_assembly_bags (box_assembly, change_of_mind) or '
+                        'out/interactions/bags for the iiwa14, out/<robot>/... for another '
+                        'robot)')
     d.add_argument('--out', default=None, type=out_dir,
-                   help='model, plots and report go here (default: out/demo or '
-                        'out/interactions/demo, out/<robot>/... for another robot)')
+                   help='model, plots and report go here (default: out/demo, '
+                        'out/interactions/demo or out/change_of_mind (with the spliced bags), '
+                        'out/<robot>/... for another robot)')
     d.add_argument('--components', type=bounded(int, 1, name='a whole number'), default=None,
                    help='number of components (default: chosen by leave-one-out)')
     d.add_argument('--json', default=None, type=new_file,
@@ -99,11 +106,12 @@ def build_parser():
     d.add_argument('--render', default=None, type=out_dir,
                    help='write videos and contact sheets here')
     d.add_argument('--held-out', type=bounded(int, 1, name='a whole number'), default=3,
-                   help='box_assembly: interactions replayed per pattern (interactions: the '
-                        'upstream test split)')
+                   help='box_assembly, change_of_mind: interactions replayed per pattern '
+                        '(interactions: the upstream test split)')
     d.add_argument('--seed', type=int, default=0,
-                   help='box_assembly: random seed of the generated demonstrations and of the '
-                        'held-out draw (default 0)')
+                   help='box_assembly, change_of_mind: random seed of the generated '
+                        'demonstrations, of the held-out draw and of the shares where the '
+                        'human turns (default 0)')
     d.add_argument('--command-delay', type=bounded(float, 0.0, 60.0), default=None,
                    metavar='S', help='hold every command from the estimator S seconds of '
                                      'simulated time before the arm gets it (a slow link)')

@@ -13,11 +13,12 @@ def add_evaluate_parser(sub):
                                         'labelled CSV recordings: plots + metrics.json')
     e.add_argument('--scenario', default=None,
                    choices=['box_assembly', 'pole', 'phase', 'missing_data', 'gestures',
-                            'interactions'],
+                            'interactions', 'change_of_mind'],
                    help="an experiment: box_assembly, pole (thesis 3.4.2, 3.4.1; generated "
                         "or --bags), phase, missing_data (generated letters, 4.3.1, 4.3.2), "
                         "gestures (UCR accelerometer gestures), interactions (NuiSI two-person "
-                        "recordings); docs/method.md says what each asks")
+                        "recordings), change_of_mind (NuiSI recordings spliced into changes "
+                        "of mind); docs/method.md says what each asks")
     e.add_argument('--csv', default=None, type=existing_dir,
                    help='instead of a scenario: a folder of labelled CSV demonstrations (with '
                         '--labels, --observed, --controlled)')

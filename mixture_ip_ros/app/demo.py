@@ -1,4 +1,5 @@
-"""`mixture-ip demo`: the closed loop end to end (``--scenario interactions``: app.interactions).
+"""`mixture-ip demo`: the closed loop end to end (``--scenario interactions``: app.interactions;
+``--scenario change_of_mind``: app.change_of_mind).
 
 Generate the box-assembly demonstrations as bags for the chosen robot (if the folder is missing),
 hold out some interactions per pattern, train on the rest (K by leave-one-out), then replay the
@@ -84,7 +85,7 @@ def prepare_box_demo(data_dir: Path, out_dir: Path, held_out: int, seed: int,
 def run_demo(args):
     """The box-assembly demo (`mixture-ip demo`); the interactions demo is app.interactions."""
     # rclpy only once the data is ready
-    from mixture_ip_ros.app.closed_loop import ClosedLoop, points_beyond_limits
+    from mixture_ip_ros.app.closed_loop import ClosedLoop
 
     robot = load_description(args.robot)
     default_data, default_out = default_paths(robot)
@@ -104,17 +105,9 @@ def run_demo(args):
     records = []
     try:
         for name in held:
-            loop.go_home()
-            target, wrist_end = demonstrated_target(data_dir / name, kin)
-            rec = loop.run_interaction(data_dir / name, true_pattern=labels[name], target=target)
-            rec.extra['wrist_end'] = wrist_end
-            rec.extra['points_beyond_limits'] = points_beyond_limits(rec.extra['commands'], kin)
-            records.append(rec)
-            print(_line(rec), flush=True)
-        latency = {'update_us_mean': loop.estimator.latency.mean_us,
-                   'update_us_max': loop.estimator.latency.max_us,
-                   'plan_us_mean': loop.estimator.plan_latency.mean_us,
-                   'plan_us_max': loop.estimator.plan_latency.max_us}
+            records.append(replay_bag(loop, data_dir / name, labels[name], kin))
+            print(interaction_line(records[-1]), flush=True)
+        latency = loop_latency(loop)
     finally:
         loop.close()
     report = make_report(records, info, latency)
@@ -129,6 +122,31 @@ def run_demo(args):
     return report
 
 
+def replay_bag(loop, bag, true_pattern, kin, target_bag=None):
+    """One bag replayed through the running ``loop`` from the robot's home posture: its record,
+    the target where the robot's hand ended in ``target_bag``'s demonstration (default: the
+    bag's own) with where the human's wrist ended there, the points of its commands beyond the
+    arm's limits and the plans the estimator refused to send (``plans_refused``)."""
+    from mixture_ip_ros.app.closed_loop import points_beyond_limits
+    loop.go_home()
+    target, wrist_end = demonstrated_target(target_bag or bag, kin)
+    refusals = loop.estimator.planner.counts.plan_refusals
+    before = dict(refusals)
+    rec = loop.run_interaction(bag, true_pattern=true_pattern, target=target)
+    rec.extra['wrist_end'] = wrist_end
+    rec.extra['points_beyond_limits'] = points_beyond_limits(rec.extra['commands'], kin)
+    rec.extra['plans_refused'] = int(sum(refusals[k] - before.get(k, 0) for k in refusals))
+    return rec
+
+
+def loop_latency(loop) -> dict:
+    """The estimator's update and plan times so far (us)."""
+    return {'update_us_mean': loop.estimator.latency.mean_us,
+            'update_us_max': loop.estimator.latency.max_us,
+            'plan_us_mean': loop.estimator.plan_latency.mean_us,
+            'plan_us_max': loop.estimator.plan_latency.max_us}
+
+
 def hand_error_cm(rec):
     return float(100 * np.linalg.norm(rec.flange[-1] - rec.target)) if len(rec.flange) else None
 
@@ -141,7 +159,8 @@ def tracking_mrad(rec):
     return 1e3 * tracking['rms'], 1e3 * tracking['max']
 
 
-def _line(rec):
+def interaction_line(rec) -> str:
+    """The line the demo prints for one interaction's record."""
     he = hand_error_cm(rec)
     wrist = rec.extra.get('wrist_end')
     to_wrist = (100 * np.linalg.norm(rec.flange[-1] - wrist)) if wrist is not None else np.nan
@@ -157,24 +176,28 @@ def _line(rec):
             + (f'; {refused} refused: {rec.extra["last_rejection"]}' if refused else ''))
 
 
+def report_row(r) -> dict:
+    """The report's row of one interaction's record."""
+    rms, worst = tracking_mrad(r)
+    return {'name': r.name, 'true_pattern': r.true_pattern,
+            'chosen_pattern': r.chosen_pattern, 'commit_fraction': r.commit_fraction,
+            'hand_error_cm': hand_error_cm(r),
+            'hand_to_wrist_cm': float(100 * np.linalg.norm(
+                r.flange[-1] - r.extra['wrist_end'])) if 'wrist_end' in r.extra else None,
+            'tracking_rms_mrad': rms, 'tracking_max_mrad': worst,
+            'non_finite_commands': r.extra.get('non_finite_commands', 0),
+            'commands': len(r.extra.get('commands', ())),
+            'commands_retimed': r.extra.get('sim_retimed'),
+            'last_retime_delay_s': r.extra.get('last_retime_delay'),
+            'commands_refused': r.extra.get('sim_rejections'),
+            'last_refusal': r.extra.get('last_rejection'),
+            'plans_refused': r.extra.get('plans_refused'),
+            'final_plan_received': r.extra.get('final_plan_received'),
+            'points_beyond_limits': r.extra.get('points_beyond_limits')}
+
+
 def make_report(records, info, latency):
-    rows = []
-    for r in records:
-        rms, worst = tracking_mrad(r)
-        rows.append({'name': r.name, 'true_pattern': r.true_pattern,
-                     'chosen_pattern': r.chosen_pattern, 'commit_fraction': r.commit_fraction,
-                     'hand_error_cm': hand_error_cm(r),
-                     'hand_to_wrist_cm': float(100 * np.linalg.norm(
-                         r.flange[-1] - r.extra['wrist_end'])) if 'wrist_end' in r.extra else None,
-                     'tracking_rms_mrad': rms, 'tracking_max_mrad': worst,
-                     'non_finite_commands': r.extra.get('non_finite_commands', 0),
-                     'commands': len(r.extra.get('commands', ())),
-                     'commands_retimed': r.extra.get('sim_retimed'),
-                     'last_retime_delay_s': r.extra.get('last_retime_delay'),
-                     'commands_refused': r.extra.get('sim_rejections'),
-                     'last_refusal': r.extra.get('last_rejection'),
-                     'final_plan_received': r.extra.get('final_plan_received'),
-                     'points_beyond_limits': r.extra.get('points_beyond_limits')})
+    rows = [report_row(r) for r in records]
     correct = [r['true_pattern'] == r['chosen_pattern'] for r in rows]
     tracked = [r['tracking_rms_mrad'] for r in rows if r['tracking_rms_mrad'] is not None]
     return {'interactions': rows,
@@ -207,7 +230,8 @@ def render_all(records, render_dir: Path):
 
 def plot_demo(records, out_dir: Path):
     """Per interaction: wrist and robot hand paths (top view and height over time) and the
-    component posterior over time, with the onset, commit and end marked."""
+    component posterior over time, with the onset, commit and end marked (and where the human
+    turned to another part: ``extra['change_time']``, app.change_of_mind)."""
     from mixture_ip_ros.viz.plots import plt, save_figure   # matplotlib on the Agg backend
     for rec in records:
         fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
@@ -231,6 +255,7 @@ def plot_demo(records, out_dir: Path):
             ax[2].plot(rec.posterior_t - t0, rec.phase, 'k--', label='phase z')
         for a in ax[1:]:
             for when, colour, what in ((rec.commit_time, 'g', 'robot committed'),
+                                       (rec.extra.get('change_time'), 'm', 'human turned'),
                                        (rec.end_time, 'r', 'human movement ended')):
                 if when is not None:
                     a.axvline(when - t0, color=colour, ls=':', label=what)

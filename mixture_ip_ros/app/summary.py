@@ -87,7 +87,8 @@ def model_lines(info) -> list:
            f' (a warp predicts held-out recordings {abs(gain):.2f} nats each '
            f'{"better" if gain > 0 else "worse"} than the linear phase)')
     lines = [f'phase: {chosen}{why}',
-             f"speed weight {_num(info.get('speed_weight'), 'g')}, covariance floor "
+             f"speed weight {_num(info.get('speed_weight'), 'g')}, switch rate "
+             f"{_num(info.get('switch_rate'), 'g')}/s, covariance floor "
              f"{_num(info.get('prior_scale'), 'g')}"]
     if info.get('warp_failed'):
         lines.append(f"the phase warp did not converge for {len(info['warp_failed'])} "
@@ -199,6 +200,25 @@ def _scalar_lines(m, limit=14) -> list:
     return lines
 
 
+def change_of_mind_lines(m) -> list:
+    """The change-of-mind evaluation of one data set (app.evaluation.change_of_mind)."""
+    lines = []
+    for method, name in (('switching', 'switching'), ('no_switch', 'never switching')):
+        x = m[method]
+        d = {k: 'never' if v is None or v == math.inf else f'{v:.2f} s'
+             for k, v in x['delay_s'].items()}
+        un = x['unchanged_recognised']
+        hand = x['hand_error_end_cm']
+        lines += [f"{name}: {x['splices']} changes of mind followed {_pct(x['followed'])} %, "
+                  f"settled after {d['median']} (median), {d['p90']} (90 %)",
+                  f"  unchanged recordings recognised {' / '.join(_pct(v) for v in un.values())}"
+                  f" % at {' / '.join(f'{100 * float(k):.0f}' for k in un)} % of the movement; "
+                  f"belief changed after 30 % in {_pct(x['unchanged_late_changes'])} %",
+                  f"  partner's hand at the end {_num(hand['spliced'], '.1f')} cm off "
+                  f"(unchanged: {_num(hand['unchanged'], '.1f')} cm)"]
+    return lines
+
+
 def evaluate_summary(metrics, written=()) -> str:
     """`mixture-ip evaluate`'s summary of ``metrics``; ``written``: the files the full
     metrics went to."""
@@ -214,10 +234,13 @@ def evaluate_summary(metrics, written=()) -> str:
         lines += labelled_lines(m)
     else:
         sets = [k for k, v in m.items() if isinstance(v, dict) and 'n_recordings' in v]
+        changes = [k for k, v in m.items() if isinstance(v, dict) and 'switching' in v]
         lines = [f'{title}:']
         for name in sets:
             lines += [f'{name}:'] + ['  ' + ln for ln in labelled_lines(m[name])]
-        if not sets:
+        for name in changes:
+            lines += [f'{name}:'] + ['  ' + ln for ln in change_of_mind_lines(m[name])]
+        if not sets and not changes:
             lines += _scalar_lines(m)
     if (m.get('runtime_s') or 0) >= 1:
         lines.append(f"took {m['runtime_s']:.0f} s")

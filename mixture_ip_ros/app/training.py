@@ -35,7 +35,8 @@ import numpy as np
 
 from mixture_ip_ros.app.naming import named_components
 from mixture_ip_ros.app.progress import Stages
-from mixture_ip_ros.core.calibration import calibrated_speed_weight, held_out_warp_gain
+from mixture_ip_ros.core.calibration import (calibrated_speed_weight, calibrated_switch_rate,
+                                             held_out_warp_gain)
 from mixture_ip_ros.core.checks import labelling, labels_fit
 from mixture_ip_ros.core.crossval import check_prepared, prepare_for_cv
 from mixture_ip_ros.core.demonstration import Layout
@@ -57,7 +58,7 @@ CRITERIA = ('auto', 'patterns', 'loo')
 
 class ModelConfig(NamedTuple):
     """The MixtureIProMP configuration (``params``) training fits its model with: the
-    caller's, and what its stages calibrate (``prior_scale``, ``speed_weight``) as each one
+    caller's, and what its stages calibrate (``prior_scale``, ``speed_weight``, ``switch_rate``) as each one
     settles it. The held-out folds of every stage fit by regression (:meth:`for_folds`), far
     cheaper than EM fits, of which the curves need dozens; the final model is fitted with the
     method asked for."""
@@ -168,6 +169,10 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
     if not config.given('speed_weight') and not config.em:
         weight, info['speed_scores'] = _calibrate_speed(run, n_components, config)
         config = config.settled(speed_weight=weight)
+    # The switch rate, read by the estimator as the speed weight is (the same folds).
+    if not config.given('switch_rate') and not config.em:
+        rate, info['switch_scores'] = _calibrate_switch(run, n_components, config)
+        config = config.settled(switch_rate=rate)
     with stages('final fit'):
         model = _final_fit(run, n_components, config)
     info['phase'] = _choose_phase(run, n_components, config)
@@ -185,6 +190,7 @@ def train(demos, *, n_components=None, candidates=range(1, 10), criterion: str =
                                           minlength=int(n_components)).tolist()
     info['prior_scale'] = float(model.prior_scale)
     info['speed_weight'] = float(model.speed_weight)
+    info['switch_rate'] = float(model.switch_rate)
     info['noise_var'] = np.asarray(model.noise_var_).tolist()
     info['warp_failed'] = [str(n) for n in failed]
     info['seconds'] = dict(stages.seconds)
@@ -289,6 +295,14 @@ def _calibrate_speed(run: _Run, n_components, config: ModelConfig):
                                        run.n_folds, config.for_folds(), run.n_jobs)
 
 
+def _calibrate_switch(run: _Run, n_components, config: ModelConfig):
+    """(switch rate, mean held-out score of each rate): core.calibration.calibrated_switch_rate.
+    """
+    with run.stages('switch rate'):
+        return calibrated_switch_rate(run.demos, run.data(), n_components, run.labels,
+                                      run.n_folds, config.for_folds(), run.n_jobs)
+
+
 def _final_fit(run: _Run, n_components, config: ModelConfig) -> MixtureIProMP:
     """The model, fitted to every demonstration with the method asked for (a regression fit
     from the preparation where a stage made it)."""
@@ -356,8 +370,9 @@ def train_to_file(demos, out_path, layout: Layout = None, observed_frame: str = 
                                                         'method': 'regression'})
     model, info = train(demos, **kwargs)
     # Held-out folds fitted by regression, as the K curves: EM fits would be far slower.
+    # the floor chosen with K; the switch rate, so that the held-out evidence is the online one
     params = {**_model_params(kwargs), 'method': 'regression',
-              'prior_scale': model.prior_scale}      # the floor chosen with K
+              'prior_scale': model.prior_scale, 'switch_rate': model.switch_rate}
     labels = kwargs.get('labels')
 
     def fold_model(index):

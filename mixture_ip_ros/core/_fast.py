@@ -22,9 +22,10 @@ cov[g, (i (i + 1) / 2 + j) LANES + l]; mu[g, i LANES + l] is entry i of its mean
 of the groups past the tracked ones, and the lanes past them in the last group, hold valid states
 that are updated with the others and never read (see OnlineEstimator's pruning).
 
-Every kernel of the layer is in this one file: numba's cache of a kernel is invalidated by
-edits to the kernel's own file only, so kernels that call one another (and the lane type
-they share) must change together.
+Every kernel of the layer that calls another or uses the lane type is in this one file:
+numba's cache of a kernel is invalidated by edits to the kernel's own file only, so kernels
+that call one another (and the lane type they share) must change together. The change
+points' kernels, which call only each other, are in _fast_switching.
 """
 
 import operator
@@ -202,8 +203,8 @@ def _tri(i, j):
 
 # 'contract' only: multiply-adds fused, no reassociation; every lane computed alike.
 @numba.njit(cache=True, nogil=True, fastmath={'contract'}, boundscheck=False)
-def kalman_update(cov, mu, loglik, n, alpha_index, alphas, times, centers, width, ys, noise,
-                  log_prior, hypothesis, joint, trace):
+def kalman_update(cov, mu, loglik, n, alpha_index, alphas, phase0, times, centers, width, ys,
+                  noise, log_prior, hypothesis, joint, trace):
     """The observations ``ys`` (J, P) at ``times`` (J,) s, in that order, in place for the first
     ``n`` columns (the tracked hypotheses; the rest of their last group is updated too): for
     each, Sigma and mu conditioned on y (eq. 4 in Kalman form) and loglik += log N(y; H mu,
@@ -221,8 +222,9 @@ def kalman_update(cov, mu, loglik, n, alpha_index, alphas, times, centers, width
     each one).
 
     cov (groups, d (d + 1) / 2 LANES), mu (groups, d LANES) (see the module's layout); per
-    column c: loglik[c], phase speed alphas[alpha_index[c]] (H = I_P kron psi(alpha t)^T, eq.
-    15 with ``centers``, ``width``), log_prior[c], and which hypothesis it is, hypothesis[c];
+    column c: loglik[c], phase speed alphas[alpha_index[c]] and phase phase0[alpha_index[c]]
+    at t = 0 (H = I_P kron psi(phase0 + alpha t)^T, eq. 15 with ``centers``, ``width``; phase0
+    is 0 but where a change of mind started a pattern mid-way, core.switching), log_prior[c], and which hypothesis it is, hypothesis[c];
     noise (groups, P LANES) = diag R of each column, in the lane layout (tied across
     components or not).
     joint (K M,): p(k, alpha_m | D) renormalised over the tracked hypotheses, 0 for the others.
@@ -239,7 +241,7 @@ def kalman_update(cov, mu, loglik, n, alpha_index, alphas, times, centers, width
     for j in range(J):
         for a in range(alphas.shape[0]):
             if used[a]:
-                _basis_row(alphas[a] * times[j], centers, width, psi[j, a])
+                _basis_row(phase0[a] + alphas[a] * times[j], centers, width, psi[j, a])
     phi = np.empty(N * LANES)
     n_rows = -(-P // 3) * 3                    # G in groups of three rows (extra rows zero)
     G = np.zeros(n_rows * d * LANES)

@@ -5,7 +5,10 @@ scored on folds held out of the model (:func:`held_out_scores`):
   posterior p_eta(alpha | D, k*) of an online estimator, fed the beginning of a movement held
   out of the model, predicts that movement's own speed (:func:`speed_log_scores`);
 - the phase (:func:`held_out_warp_gain`): whether the phase warps (core.warped) predict
-  held-out movements better than the linear phase.
+  held-out movements better than the linear phase;
+- the switch rate (:func:`calibrated_switch_rate`): how readily the online belief lets a
+  person change their mind (core.switching), scored on held-out movements, unchanged and
+  spliced into changes of mind (core.splice) (:func:`switch_log_scores`).
 """
 
 import numpy as np
@@ -16,12 +19,21 @@ from .mixture import MixtureIProMP
 from .numerics import first_best
 from .online import OnlineEstimator
 from .phase import log_density_on_grid, tempered_speed_posterior
-from .playback import prefixes
+from .playback import observed_rows, prefixes
+from .splice import BLEND, SHARES, splice
 from .warped import PhaseWarps
 
 # The speed weights training chooses from, and the points of a movement it scores them at.
 SPEED_WEIGHTS = (1.0, 0.5, 0.2, 0.1, 0.05, 0.02, 0.01, 0.0)
 SPEED_FRACTIONS = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
+# The switch rates (per second) training chooses from. Scored from this share of an unchanged
+# movement on: its beginning is where the patterns are still told apart, with or without
+# changes of mind.
+SWITCH_RATES = (0.0, 0.1, 0.3, 1.0)
+SETTLED_FROM = 0.3
+# Held-out movements per fold the switch rate is scored on (each also spliced into a change of
+# mind), drawn at random: every rate plays each of them back.
+SWITCH_STREAMS = 6
 
 
 def speed_log_scores(model, demonstrations, weights=SPEED_WEIGHTS, fractions=SPEED_FRACTIONS,
@@ -92,3 +104,86 @@ def held_out_warp_gain(demos, data, n_components, labels, n_folds, params, n_job
     gains = held_out_scores(demos, data, n_components, labels, n_folds, params,
                             lambda model, held_out: PhaseWarps().gains(model, held_out), n_jobs)
     return float(np.mean(np.concatenate(gains))) if gains else None
+
+
+def _truth(model, demo):
+    """The component a held-out demonstration belongs to: eq. 11 with its phase known."""
+    rows = observed_rows(demo)
+    return int(np.argmax(model.component_posterior(demo.phase[rows], demo.observed[rows],
+                                                   alpha=1.0 / demo.duration)))
+
+
+def _changes(demonstrations, truth, picked, rng):
+    """(splice, index of the second) for each picked demonstration that another component's
+    holds: its beginning joined to the rest of one of those, drawn with ``rng``, at a share
+    from core.splice.SHARES."""
+    for i in picked:
+        others = [j for j, k in enumerate(truth) if k != truth[i]]
+        if others:
+            j = int(rng.choice(others))
+            yield splice(demonstrations[i], demonstrations[j], float(rng.choice(SHARES))), j
+
+
+def switch_scores(model, demonstrations, rates=SWITCH_RATES, n_alpha: int = 50,
+                  min_interval: float = 0.05, seed: int = 0, n_streams: int = SWITCH_STREAMS):
+    """How often each switch rate's belief (core.switching) names the pattern held-out movements
+    follow: the share of samples whose most probable component is the pattern under way, from
+    :data:`SETTLED_FROM` of an unchanged movement on, and from the end of the turn
+    (core.splice.BLEND) on in changes of mind spliced from them (each movement's beginning
+    joined to the rest of one of another component, at a share from core.splice.SHARES).
+    At most ``n_streams`` movements, drawn with ``seed``. The pattern of a movement is the
+    component that explains it best with its phase known (eq. 11). Returns (share per rate for
+    the unchanged (len rates,), the same for the changes (len rates,)), NaN where none."""
+    rng = np.random.default_rng(seed)
+    picked = rng.permutation(len(demonstrations))[:n_streams]
+    truth = [_truth(model, d) for d in demonstrations]
+    streams = []            # (demonstration, pattern per sample, scored from (s), changed)
+    for i in picked:
+        d = demonstrations[i]
+        streams.append((d, np.full(len(observed_rows(d)), truth[i]),
+                        SETTLED_FROM * d.duration, 0))
+    for i, (s, j) in zip(picked, _changes(demonstrations, truth, picked, rng)):
+        t = s.demo.t[observed_rows(s.demo)]
+        streams.append((s.demo, np.where(t < s.t_change, truth[i], truth[j]),
+                        s.t_change + BLEND, 1))
+    # One playback for every rate: rate 0 is the estimator's own belief, the others follow it.
+    est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval, switch_rate=0.0)
+    positive = [r for r in rates if r > 0]
+    est.compare_rates(positive)
+    right = np.zeros((len(rates), 2))
+    counted = np.zeros((len(rates), 2))
+    for demo, pattern, t_from, changed in streams:
+        t = demo.t[observed_rows(demo)]
+        hits = []
+        for c, _ in enumerate(prefixes(est, demo, t)):
+            if t[c] >= t_from:
+                beliefs = iter(est.rate_beliefs())
+                hits.append([np.argmax(est.component_posterior() if r == 0 else next(beliefs))
+                             == pattern[c] for r in rates])
+        if hits:
+            right[:, changed] += np.mean(hits, axis=0)
+            counted[:, changed] += 1
+    with np.errstate(invalid='ignore'):
+        scores = right / counted
+    return scores[:, 0], scores[:, 1]
+
+
+def calibrated_switch_rate(demos, data, n_components, labels, n_folds, params, n_jobs=None):
+    """The switch rate (:data:`SWITCH_RATES`) whose belief names held-out movements' patterns
+    most often (:func:`switch_scores` over ``n_folds`` folds: :func:`held_out_scores`), the
+    unchanged movements and the changes of mind weighing alike (a person is not assumed to
+    change their mind more or less often than not); ties: the smaller rate. (0, None) with one
+    component or where no fold can hold the model; else (rate, mean score of each rate)."""
+    if len(demos) < 2 or n_components < 2:
+        return 0.0, None
+    folds = held_out_scores(demos, data, n_components, labels, n_folds, params,
+                            switch_scores, n_jobs)
+    if not folds:
+        return 0.0, None
+    unchanged = np.nanmean([f[0] for f in folds], axis=0)
+    changed = np.nanmean([f[1] for f in folds], axis=0)
+    total = unchanged + np.where(np.isnan(changed), 0.0, changed)
+    if not np.all(np.isfinite(total)):
+        return 0.0, None
+    best = first_best(total)
+    return SWITCH_RATES[best], {f'{r:g}': float(x) for r, x in zip(SWITCH_RATES, total)}

@@ -115,6 +115,11 @@ class MixtureIProMP(PhaseKnownInference):
     claims. Fitting does not use it; training calibrates it on held-out demonstrations
     (core.calibration.speed_log_scores).
 
+    ``switch_rate`` (switches per second, >= 0) is how readily the online belief lets a person
+    change their mind mid-movement (core.switching; 0: never, eq. 11). Fitting does not use it;
+    training calibrates it on held-out demonstrations spliced into changes of mind
+    (core.calibration.calibrated_switch_rate).
+
     ``smoothing`` (None: chosen from the demonstrations) is each DOF's curvature penalty of the
     per-demonstration weights (eq. 14 with core.promp.penalised_weights; ``method='regression'``):
     None picks it by empirical Bayes over the demonstrations given to :meth:`prepare`
@@ -134,7 +139,8 @@ class MixtureIProMP(PhaseKnownInference):
                  ridge: float = 1e-6, prior_strength: float = 10.0, prior_scale: float = 0.02,
                  max_iter: int = 200, tol: float = 1e-7, n_init: int = 10, random_state=0,
                  observation_noise=0.0, noise: str = 'tied', noise_var=None,
-                 speed_weight: float = 1.0, translation=(), smoothing=None):
+                 speed_weight: float = 1.0, translation=(), smoothing=None,
+                 switch_rate: float = 0.0):
         self.n_components = n_components
         self.n_basis = n_basis
         self.method = method
@@ -151,6 +157,7 @@ class MixtureIProMP(PhaseKnownInference):
         self.speed_weight = speed_weight
         self.translation = translation
         self.smoothing = smoothing
+        self.switch_rate = switch_rate
 
     # ------------------------------------------------------------------ learning
     def fit(self, demonstrations, labels=None, init=None):
@@ -453,6 +460,11 @@ class MixtureIProMP(PhaseKnownInference):
         if (isinstance(w, bool) or not isinstance(w, (int, float, np.integer, np.floating))
                 or not 0.0 <= w <= 1.0):
             raise ValueError(f'speed_weight must be in [0, 1], got {self.speed_weight!r}')
+        r = self.switch_rate
+        if (isinstance(r, bool) or not isinstance(r, (int, float, np.integer, np.floating))
+                or not (np.isfinite(r) and r >= 0.0)):
+            raise ValueError(f'switch_rate must be a number of switches per second >= 0, '
+                             f'got {self.switch_rate!r}')
 
     def demonstration_weights(self, demonstrations):
         """The weight vectors that ``fit`` clusters (:meth:`_weights` with the fitted smoothing),

@@ -38,11 +38,14 @@ class OnlineEstimator(RecursivePosterior):
     """The online estimator: p(k, alpha | D) for a fitted :class:`MixtureIProMP` updated per
     observation (core.recursive.RecursivePosterior: decimation ``min_interval`` (s), the grid
     of ``n_alpha`` phase speeds over ``alpha_range_std`` prior standard deviations, pruning
-    below ``prune_below``), and the trajectories of both agents it predicts."""
+    below ``prune_below``, the rate of changes of mind ``switch_rate``: None, the model's), and
+    the trajectories of both agents it predicts."""
 
     def __init__(self, model, n_alpha: int = 50, min_interval: float = 0.05,
-                 alpha_range_std: float = 3.0, prune_below: float = 0.0):
-        super().__init__(model, n_alpha, min_interval, alpha_range_std, prune_below)
+                 alpha_range_std: float = 3.0, prune_below: float = 0.0,
+                 switch_rate: float = None):
+        super().__init__(model, n_alpha, min_interval, alpha_range_std, prune_below,
+                         switch_rate)
         do = self.n_observed * self.n_basis
         # Regression of controlled on observed weights per component (exact conditioning).
         self._gain, self._cond_cov = [], []
@@ -95,8 +98,18 @@ class OnlineEstimator(RecursivePosterior):
         (PhaseWarps.component_posterior) over the samples spaced as training read the warps:
         a pace that changed within the movement does not misplace the phase.
         Samples after ``t_end`` are taken at phase 1: the end is dated back to when the hand
-        stopped, and after it the hand is at rest where the movement ended. Raises ValueError
-        without samples or for a t_end that is not positive."""
+        stopped, and after it the hand is at rest where the movement ended. With changes of
+        mind (``switch_rate`` > 0, core.switching) this is the part of the belief without a
+        change since the onset; the part with one is the belief's own (its segments' phases do
+        not follow from the end time). Raises ValueError without samples or for a t_end that is
+        not positive."""
+        p = self._end_posterior_since_onset(t_end)
+        if self._changes is None:
+            return p
+        unchanged, changed = self._changes.split(self._onset_log_evidence()[0])
+        return unchanged * p + changed
+
+    def _end_posterior_since_onset(self, t_end):
         if not self._times:
             raise ValueError('no observation absorbed yet')
         if not (np.isfinite(t_end) and t_end > 0):
@@ -181,7 +194,9 @@ class OnlineEstimator(RecursivePosterior):
         path off by half a period errs more than the mean. Each hypothesis holds its final
         posture after its own end (alpha_m t > 1). Returns (k, positions, velocities,
         accelerations), each (len(times), Q); without ``derivatives`` (an evaluation of
-        positions) the velocities and accelerations are None and not computed."""
+        positions) the velocities and accelerations are None and not computed. With changes of
+        mind, the part of k's belief after a change is predicted by the started segments' own
+        weights and phase lines (core.switching.ChangePoints.lines), the rest as above."""
         k = self._map_indices()[0] if component is None else int(component)
         times = np.asarray(times, dtype=float)
         speeds, probs = self.speed_hypotheses(k)
@@ -189,8 +204,20 @@ class OnlineEstimator(RecursivePosterior):
         mean_c = self.controlled_mean(k, mu_o).reshape(len(speeds), -1, self.n_basis)
         basis = self.model.basis_
         alphas = self.alphas[speeds]
-        pos, vel, acc = expected_trajectory(mean_c, alphas, alphas, probs, times,
+        share, columns, shares = 1.0, (), ()
+        if self._changes is not None:
+            share, columns, shares = self._changes.lines(k, self._onset_log_evidence()[0])
+        pos, vel, acc = expected_trajectory(mean_c, alphas, alphas, probs * share, times,
                                             basis.centers, basis.width, derivatives)
+        # After a change, the segments' own weights on their own phase lines
+        # z = z0 + rate t (core.switching): each line's path at times shifted by z0 / rate.
+        for c, p in zip(columns, shares):
+            mu, z0, rate = self._changes.column(c)
+            line = expected_trajectory(
+                self.controlled_mean(k, mu).reshape(1, -1, self.n_basis), np.array([rate]),
+                np.array([rate]), np.array([p]), times + z0 / rate, basis.centers,
+                basis.width, derivatives)
+            pos, vel, acc = pos + line[0], vel + line[1], acc + line[2]
         return (k, pos, vel, acc) if derivatives else (k, pos, None, None)
 
     def likely_components(self):

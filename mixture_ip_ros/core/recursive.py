@@ -14,9 +14,10 @@ from ._fast import LANES, compact_lanes, from_lanes, kalman_update, to_lanes, tr
 from .noise import decimated_rows, spaced
 from .numerics import logsumexp, logsumexp_rows
 from .phase import alpha_grid, alpha_log_prior, tempered_speed_posterior, tempered_speed_weights
+from .switching import ChangeOfMind, ChangePoints
 
 
-class RecursivePosterior:
+class RecursivePosterior(ChangeOfMind):
     """Recursive p(k, alpha | D) for a fitted :class:`MixtureIProMP` (any layout: P >= 1
     observed DOFs, Q >= 0 controlled); core.online.OnlineEstimator adds what it predicts.
 
@@ -48,10 +49,18 @@ class RecursivePosterior:
     The samples absorbed are kept (time and position, in the order absorbed), so that a
     hypothesis the grid does not hold can be evaluated exactly when asked
     (OnlineEstimator.posterior_at, OnlineEstimator.end_posterior).
+
+    Changes of mind: ``switch_rate`` (departures per second; None: the model's ``switch_rate``,
+    which training calibrates) lets the person turn to another pattern at any time
+    (core.switching, whose ChangeOfMind part this class is): p(k | D) is the change points'
+    belief, and each component's phase speed is read from its hypotheses since the onset as
+    above. With rate 0 it is eq. 11. The change points take the samples in time order; one
+    absorbed before a later one already in (the planner's backlog) goes to the hypotheses since
+    the onset only. A component pruned whole holds no belief (it has no phase speeds left).
     """
 
     def __init__(self, model, n_alpha: int, min_interval: float, alpha_range_std: float,
-                 prune_below: float):
+                 prune_below: float, switch_rate: float = None):
         model._check_fitted()
         self.model = model
         self.min_interval = float(min_interval)
@@ -60,6 +69,7 @@ class RecursivePosterior:
         do = P * N
         self.alphas = alpha_grid(model.alpha_mean_, model.alpha_std_, n_alpha, alpha_range_std)
         M = len(self.alphas)
+        self._phase0 = np.zeros(M)
         self._log_prior = (np.log(model.weights_)[:, None]
                            + alpha_log_prior(self.alphas, model.alpha_mean_, model.alpha_std_)
                            ).ravel()
@@ -68,6 +78,13 @@ class RecursivePosterior:
                              f'got {prune_below}')
         self.prune_below = float(prune_below)
         self.speed_weight = float(model.speed_weight)
+        rate = getattr(model, 'switch_rate', 0.0) if switch_rate is None else switch_rate
+        if (isinstance(rate, bool) or not isinstance(rate, (int, float, np.integer, np.floating))
+                or not (np.isfinite(rate) and rate >= 0.0)):
+            raise ValueError(f'switch_rate must be a number of switches per second >= 0, '
+                             f'got {rate!r}')
+        self.switch_rate = float(rate)
+        self._log_weights = np.log(model.weights_)
         # Column c of the state is hypothesis (k, m) = divmod(c, M) until pruning reorders them;
         # the columns are padded to whole lane groups with copies of column 0 (never read).
         self._tri = tri_index(do)
@@ -82,6 +99,10 @@ class RecursivePosterior:
         noise = np.broadcast_to(np.asarray(model.observed_noise_var_at(self.min_interval),
                                            dtype=float), (K, model.n_observed_))
         self._noise0 = to_lanes(np.repeat(noise, M, 0)[self._hyp0])
+        self._changes = (ChangePoints(model, noise, self.switch_rate)
+                         if self.switch_rate > 0.0 else None)
+        self._noise_k = noise
+        self._others = []       # change points of other rates (compare_rates)
         self._cov, self._mu, self._noise = (np.empty_like(a) for a in
                                             (self._cov0, self._mu0, self._noise0))
         self.reset()
@@ -107,6 +128,9 @@ class RecursivePosterior:
         self.t_last = None      # time of the last observation used
         self.t_seen = None      # time of the last observation offered (used or skipped)
         self._joint = None      # p(k, alpha_m | D), computed with each update
+        self._t_chain = 0.0     # the latest sample's time the change points have seen
+        for changes in self._chains():
+            changes.reset()
         self._smallest = 0.0    # smallest p(k, alpha_m | D) of a tracked hypothesis (0: unknown)
 
     def update(self, t: float, y) -> bool:
@@ -163,8 +187,10 @@ class RecursivePosterior:
 
         In any order: the weights do not change over the movement, so the posterior and the
         evidence after a set of observations do not depend on the order they were absorbed in
-        (the planner absorbs the samples held before an onset while live ones come in). It does
-        not prune: call :meth:`prune` once the samples held are in.
+        (the planner absorbs the samples held before an onset while live ones come in); with
+        changes of mind, a sample before one already in speaks for the hypotheses since the
+        onset only (the class docstring). It does not prune: call :meth:`prune` once the samples
+        held are in.
         """
         y = self._checked(y)
         if not (np.isfinite(t) and t >= 0):
@@ -174,16 +200,14 @@ class RecursivePosterior:
     def _absorb(self, t, y):
         self._absorb_many(np.array([float(t)]), y[None])
 
-    def _absorb_many(self, times, values) -> np.ndarray:
-        """Condition on the samples ``values`` (J, P) at ``times`` (J,), checked, in order;
-        returns each tracked column's log evidence after each sample (J, n_tracked)."""
+    def _kalman(self, times, values) -> np.ndarray:
         joint = np.empty(len(self._col))
         trace = np.empty((len(times), len(self._loglik)))
         basis = self.model.basis_
         self._smallest = kalman_update(self._cov, self._mu, self._loglik, self.n_tracked,
-                                       self._alpha_index, self.alphas, times, basis.centers,
-                                       basis.width, values, self._noise, self._prior,
-                                       self._hyp, joint, trace)
+                                       self._alpha_index, self.alphas, self._phase0, times,
+                                       basis.centers, basis.width, values, self._noise,
+                                       self._prior, self._hyp, joint, trace)
         self.n_observations += len(times)
         self._times.extend(times.tolist())
         self._values.extend(np.array(values))   # copies: the caller may reuse its buffer
@@ -220,6 +244,9 @@ class RecursivePosterior:
         self.t_seen = float(times[-1]) if self.t_seen is None else max(float(times[-1]),
                                                                       self.t_seen)
         trace = self._absorb_many(times[picked], ys)
+        if self._changes is not None:
+            return (np.array([self.log_marginal()]) if self._marginals is None
+                    else self._marginals)
         return logsumexp_rows(self._prior[:self.n_tracked] + trace)   # log_marginal's sum
 
     def _offer_each(self, times, values) -> np.ndarray:
@@ -261,6 +288,8 @@ class RecursivePosterior:
         self._col[:] = -1
         self._col[self._hyp[:n]] = np.arange(n)
         self.n_tracked = n
+        if self._changes is not None:
+            self._set_joint()
         return len(dropped)
 
     def _tempered_joint(self):
@@ -334,9 +363,11 @@ class RecursivePosterior:
     def log_marginal(self) -> float:
         """log p(D) = log sum_(k, m) p(k, alpha_m) p(D | k, alpha_m) (eqs. 16-18): how well the
         model as a whole explains the observations (core.novelty). Over the tracked hypotheses:
-        with pruning it is low by at most the log of 1 - ``pruned_mass``."""
+        with pruning it is low by at most the log of 1 - ``pruned_mass``. With changes of mind,
+        the change-point model's (core.switching): a change to another pattern is explained."""
         n = self.n_tracked
-        return logsumexp(self._prior[:n] + self._loglik[:n])
+        onset = logsumexp(self._prior[:n] + self._loglik[:n])
+        return onset if self._changes is None else self._changes.total(onset)
 
     def component_posterior(self):
         """p(k | D) (eq. 11 with the phase marginalised)."""

@@ -43,7 +43,7 @@ FORMAT_VERSION = 4
 _READABLE_VERSIONS = (1, 2, 3, 4)
 _PARAMS = ('n_components', 'n_basis', 'method', 'ridge', 'prior_strength', 'prior_scale',
            'max_iter', 'tol', 'n_init', 'random_state', 'observation_noise', 'noise',
-           'noise_var', 'speed_weight', 'translation', 'smoothing')
+           'noise_var', 'speed_weight', 'translation', 'smoothing', 'switch_rate')
 _ARRAYS = ('weights', 'means', 'covariances', 'noise_var', 'alpha_mean', 'alpha_std',
            'prior_cov', 'noise_time')
 # The warp family a file's warp_mean / warp_sd are parameters of (core.warp).

@@ -369,7 +369,8 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
                     rec = self.planner.current
                     warn, text = finished_report(rec, self.planner.settings,
                                                  self._label(rec.component))
-                    (self.get_logger().warning if warn else self.get_logger().info)(text)
+                    log = self.get_logger()     # a call site per severity (rclpy's rule)
+                    log.warning(text) if warn else log.info(text)
             else:
                 self.planner.gap()
         except Exception as exc:

@@ -6,6 +6,7 @@ metrics.json, one module per scenario over the pieces they share (common, baseli
 - gestures (gestures): real human motion of one agent, PickupGestureWiimoteZ;
 - interactions (interactions): real two-person interactions, NuiSI v1 and v2; and any folder of
   labelled CSV recordings (:func:`evaluate_csv`);
+- change_of_mind (change_of_mind): NuiSI v1 and v2 recordings spliced into changes of mind;
 - a trained model file scored on labelled CSV recordings without retraining
   (:func:`evaluate_model_csv`, trained_model).
 
@@ -24,7 +25,8 @@ from mixture_ip_ros.app.evaluation.common import (EvalConfig, jsonable, load_lab
                                                   subsampled)
 from mixture_ip_ros.io.files import write_text_atomic
 
-SCENARIOS = ('box_assembly', 'pole', 'phase', 'missing_data', 'gestures', 'interactions')
+SCENARIOS = ('box_assembly', 'pole', 'phase', 'missing_data', 'gestures', 'interactions',
+             'change_of_mind')
 
 __all__ = ['SCENARIOS', 'EvalConfig', 'evaluate', 'evaluate_csv', 'evaluate_model_csv',
            'subsampled']
@@ -97,6 +99,13 @@ def evaluate(scenario: str, out_dir: Path, seed: int = 0, quick: bool = False, *
         metrics = evaluate_nuisi(out_dir, config or interactions_config(quick), seed,
                                  progress=progress)
         source = 'NuiSI v1 and v2'
+    elif scenario == 'change_of_mind':
+        from mixture_ip_ros.app.evaluation.change_of_mind import evaluate_change_of_mind
+        from mixture_ip_ros.app.evaluation.interactions import interactions_config
+        out_dir.mkdir(parents=True, exist_ok=True)
+        metrics = evaluate_change_of_mind(config or interactions_config(quick), seed,
+                                          progress=progress)
+        source = 'NuiSI v1 and v2, spliced'
     else:
         from mixture_ip_ros.app.evaluation.letters import (evaluate_missing_data,
                                                            evaluate_phase, letter_config)
