@@ -216,6 +216,7 @@ def test_training_is_the_same_on_one_thread_or_several_and_its_folds_are_plain_f
     assert np.allclose([info['speed_scores'][f'{w:g}'] for w in SPEED_WEIGHTS], total / n,
                        rtol=1e-9, atol=0)
     plain = calibrate(demos, lambda i: MixtureIProMP(3, speed_weight=one.speed_weight,
+                                                     switch_rate=one.switch_rate,
                                                      **params).fit([demos[j] for j in i]),
                       n_jobs=1)
     assert np.allclose(one.novelty_.prefix, plain.prefix, rtol=1e-9, atol=0)

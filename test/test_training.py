@@ -164,8 +164,8 @@ def test_training_says_where_its_time_went_stage_by_stage(tmp_path):
                                 candidates=(1, 2, 3), n_basis=6,
                                 stages=Stages(text_stages(stream)))
     warped = ['phase warps'] if info['phase']['chosen'] == 'warped' else []
-    names = ['preparing', 'choosing K', 'covariance floor', 'speed weight', 'final fit',
-             'phase choice', *warped, 'novelty', 'saving']
+    names = ['preparing', 'choosing K', 'covariance floor', 'speed weight', 'switch rate',
+             'final fit', 'phase choice', *warped, 'novelty', 'saving']
     assert list(info['seconds']) == names and all(s >= 0 for s in info['seconds'].values())
     lines = log.getvalue().splitlines()
     assert [ln.split(': ')[0] for ln in lines] == names and all(ln.endswith(' s') for ln in lines)

@@ -24,8 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from mixture_ip_ros.app.demo import (interaction_line, loop_latency, make_report, plot_demo,
-                                     prepare_box_demo, render_all, replay_bag, report_row)
+from mixture_ip_ros.app.demo import (demo_folders, interaction_line, loop_latency, make_report,
+                                     plot_demo, prepare_box_demo, render_all, replay_bag,
+                                     report_row)
 from mixture_ip_ros.app.summary import demo_summary, write_json
 from mixture_ip_ros.io.bags import read_bag
 from mixture_ip_ros.robot.description import DEFAULT_ROBOT, load_description
@@ -187,11 +188,7 @@ def replay(loop, data_dir: Path, labels: dict, held, folder: Path, recipe: dict,
 def run(args):
     """The demo of this scenario (args of `mixture-ip demo`); returns the report."""
     from mixture_ip_ros.app.closed_loop import ClosedLoop   # rclpy only once the data is ready
-    robot = load_description(args.robot)
-    default_data, default_out = default_paths(robot)
-    data_dir = Path(args.data) if args.data else default_data
-    out_dir = Path(args.out) if args.out else default_out
-    out_dir.mkdir(parents=True, exist_ok=True)
+    robot, data_dir, out_dir = demo_folders(args, default_paths)
     labels, held, model_path, info = prepare_box_demo(
         data_dir, out_dir, args.held_out, args.seed, n_components=args.components, robot=robot)
     print(f"{robot.name}: trained on {info['n_demonstrations']} demonstrations: "

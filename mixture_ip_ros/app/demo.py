@@ -58,6 +58,17 @@ def default_paths(robot) -> tuple:
     return root / 'box_assembly_bags', root / 'demo'
 
 
+def demo_folders(args, paths):
+    """(robot description, data folder, output folder, made) of a demo's ``args``;
+    ``paths(robot)`` gives the default folders."""
+    robot = load_description(args.robot)
+    default_data, default_out = paths(robot)
+    data_dir = Path(args.data) if args.data else default_data
+    out_dir = Path(args.out) if args.out else default_out
+    out_dir.mkdir(parents=True, exist_ok=True)
+    return robot, data_dir, out_dir
+
+
 def prepare_box_demo(data_dir: Path, out_dir: Path, held_out: int, seed: int,
                      n_components=None, robot=None):
     """Bags for ``robot`` (generated if missing), the held-out split and a trained model file."""
@@ -87,11 +98,7 @@ def run_demo(args):
     # rclpy only once the data is ready
     from mixture_ip_ros.app.closed_loop import ClosedLoop
 
-    robot = load_description(args.robot)
-    default_data, default_out = default_paths(robot)
-    data_dir = Path(args.data) if args.data else default_data
-    out_dir = Path(args.out) if args.out else default_out
-    out_dir.mkdir(parents=True, exist_ok=True)
+    robot, data_dir, out_dir = demo_folders(args, default_paths)
     labels, held, model_path, info = prepare_box_demo(
         data_dir, out_dir, args.held_out, args.seed, n_components=args.components, robot=robot)
     print(f"{robot.name}: trained on {info['n_demonstrations']} demonstrations: "

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mixture_ip_ros.app.demo import demo_folders
 from mixture_ip_ros.app.progress import text_progress
 from mixture_ip_ros.app.summary import demo_summary, write_json
 from mixture_ip_ros.app.training import train_to_file
@@ -202,11 +203,7 @@ def beyond_limits(record, kin) -> int:
 
 def run(args):
     """The demo of this scenario (args of `mixture-ip demo`); returns the report."""
-    robot = load_description(args.robot)
-    default_data, default_out = default_paths(robot)
-    data_dir = Path(args.data) if args.data else default_data
-    out_dir = Path(args.out) if args.out else default_out
-    out_dir.mkdir(parents=True, exist_ok=True)
+    robot, data_dir, out_dir = demo_folders(args, default_paths)
     scene, model_path, info = prepare_interactions_demo(data_dir, out_dir, robot,
                                                         n_components=args.components)
     print(f'{robot.name}: reach scale {scene.placement.scale:.3f}; trained on '

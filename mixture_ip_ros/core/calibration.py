@@ -168,6 +168,15 @@ def switch_scores(model, demonstrations, rates=SWITCH_RATES, n_alpha: int = 50,
     return scores[:, 0], scores[:, 1]
 
 
+def _mean_over_folds(scores) -> np.ndarray:
+    """The mean per rate over the folds that scored one (NaN where none did)."""
+    scores = np.asarray(scores, dtype=float)
+    have = ~np.isnan(scores)
+    total = np.where(have, scores, 0.0).sum(axis=0)
+    count = have.sum(axis=0)
+    return np.where(count > 0, total / np.maximum(count, 1), np.nan)
+
+
 def calibrated_switch_rate(demos, data, n_components, labels, n_folds, params, n_jobs=None):
     """The switch rate (:data:`SWITCH_RATES`) whose belief names held-out movements' patterns
     most often (:func:`switch_scores` over ``n_folds`` folds: :func:`held_out_scores`), the
@@ -180,8 +189,7 @@ def calibrated_switch_rate(demos, data, n_components, labels, n_folds, params, n
                             switch_scores, n_jobs)
     if not folds:
         return 0.0, None
-    unchanged = np.nanmean([f[0] for f in folds], axis=0)
-    changed = np.nanmean([f[1] for f in folds], axis=0)
+    unchanged, changed = (_mean_over_folds([f[g] for f in folds]) for g in (0, 1))
     total = unchanged + np.where(np.isnan(changed), 0.0, changed)
     if not np.all(np.isfinite(total)):
         return 0.0, None

@@ -99,17 +99,10 @@ class OnlineEstimator(RecursivePosterior):
         a pace that changed within the movement does not misplace the phase.
         Samples after ``t_end`` are taken at phase 1: the end is dated back to when the hand
         stopped, and after it the hand is at rest where the movement ended. With changes of
-        mind (``switch_rate`` > 0, core.switching) this is the part of the belief without a
-        change since the onset; the part with one is the belief's own (its segments' phases do
-        not follow from the end time). Raises ValueError without samples or for a t_end that is
-        not positive."""
-        p = self._end_posterior_since_onset(t_end)
-        if self._changes is None:
-            return p
-        unchanged, changed = self._changes.split(self._onset_log_evidence()[0])
-        return unchanged * p + changed
-
-    def _end_posterior_since_onset(self, t_end):
+        mind (``switch_rate`` > 0, core.switching) too: the change points' segments start
+        their phase lines where the phase was believed, which the end time does not correct,
+        and a belief that moves at the movement's end moves on the ending several patterns
+        share. Raises ValueError without samples or for a t_end that is not positive."""
         if not self._times:
             raise ValueError('no observation absorbed yet')
         if not (np.isfinite(t_end) and t_end > 0):

@@ -137,14 +137,18 @@ class ChangePoints:
         return float(np.exp(onset - top).sum() / total), np.exp(per_k - top) / total
 
     def lines(self, component: int, onset_evidence):
-        """Where component k's belief lies: (the share of it without a change since the onset,
-        the started columns of k holding the rest (indices), their shares); the shares sum to
-        1 over both, and a column with less than SUPPORT of k's belief is left out (its share
-        to the onset's part)."""
+        """What component k is predicted from: (the share of its hypotheses since the onset,
+        started columns of k (indices), their shares; the shares sum to 1). The pattern the
+        hypotheses since the onset explain best is predicted by them alone: they hold every
+        sample of its movement (a disruption of it keeps its path; a restart conditioned on
+        the latest samples predicts it worse). Another pattern is one the person may have
+        turned to, whose hypotheses since the onset absorbed the first pattern's samples: the
+        part of its belief after a change is predicted by its segments. A column with less
+        than SUPPORT of k's belief is left out."""
         onset, started = self.masses(onset_evidence)
         mine = np.flatnonzero(self._component == component)
         m = np.r_[onset[component], started[mine]]
-        if not np.isfinite(m.max()):
+        if component == int(np.argmax(onset)) or not np.isfinite(m.max()):
             return 1.0, mine[:0], np.zeros(0)
         p = np.exp(m - m.max())
         p /= p.sum()
