@@ -73,6 +73,16 @@ def checked_demonstrations(demonstrations) -> list:
     return demos
 
 
+def checked_switch_rate(rate) -> float:
+    """A switch rate (changes of mind per second, core.switching) as a float: a number >= 0;
+    ValueError otherwise."""
+    if (isinstance(rate, bool) or not isinstance(rate, (int, float, np.integer, np.floating))
+            or not (np.isfinite(rate) and rate >= 0.0)):
+        raise ValueError(f'switch_rate must be a number of switches per second >= 0, '
+                         f'got {rate!r}')
+    return float(rate)
+
+
 def checked_observation(z, Y, n_observed):
     """(phases z (m,), observed agent Y (m, P)) as float arrays: m >= 1 samples, phases
     finite, values NaN (missing) or finite, not all missing."""

@@ -21,7 +21,8 @@ import numpy as np
 from scipy import linalg
 
 from .basis import GaussianBasis
-from .checks import checked_demonstrations, label_indices, labelling, named_indices
+from .checks import (checked_demonstrations, checked_switch_rate, label_indices, labelling,
+                     named_indices)
 from .gmm import (_gmm_log_prob, covariance_penalty_of_m_step, covariance_prior,
                   gmm_maximization, latent_e_step, noise_m_step)
 from .inference import PhaseKnownInference
@@ -460,11 +461,7 @@ class MixtureIProMP(PhaseKnownInference):
         if (isinstance(w, bool) or not isinstance(w, (int, float, np.integer, np.floating))
                 or not 0.0 <= w <= 1.0):
             raise ValueError(f'speed_weight must be in [0, 1], got {self.speed_weight!r}')
-        r = self.switch_rate
-        if (isinstance(r, bool) or not isinstance(r, (int, float, np.integer, np.floating))
-                or not (np.isfinite(r) and r >= 0.0)):
-            raise ValueError(f'switch_rate must be a number of switches per second >= 0, '
-                             f'got {self.switch_rate!r}')
+        checked_switch_rate(self.switch_rate)
 
     def demonstration_weights(self, demonstrations):
         """The weight vectors that ``fit`` clusters (:meth:`_weights` with the fitted smoothing),

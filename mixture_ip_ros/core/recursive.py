@@ -11,6 +11,7 @@ component.
 import numpy as np
 
 from ._fast import LANES, compact_lanes, from_lanes, kalman_update, to_lanes, tri_index
+from .checks import checked_switch_rate
 from .noise import decimated_rows, spaced
 from .numerics import logsumexp, logsumexp_rows
 from .phase import alpha_grid, alpha_log_prior, tempered_speed_posterior, tempered_speed_weights
@@ -78,13 +79,8 @@ class RecursivePosterior(ChangeOfMind):
                              f'got {prune_below}')
         self.prune_below = float(prune_below)
         self.speed_weight = float(model.speed_weight)
-        rate = getattr(model, 'switch_rate', 0.0) if switch_rate is None else switch_rate
-        if (isinstance(rate, bool) or not isinstance(rate, (int, float, np.integer, np.floating))
-                or not (np.isfinite(rate) and rate >= 0.0)):
-            raise ValueError(f'switch_rate must be a number of switches per second >= 0, '
-                             f'got {rate!r}')
-        self.switch_rate = float(rate)
-        self._log_weights = np.log(model.weights_)
+        self.switch_rate = checked_switch_rate(
+            getattr(model, 'switch_rate', 0.0) if switch_rate is None else switch_rate)
         # Column c of the state is hypothesis (k, m) = divmod(c, M) until pruning reorders them;
         # the columns are padded to whole lane groups with copies of column 0 (never read).
         self._tri = tri_index(do)
@@ -129,6 +125,7 @@ class RecursivePosterior(ChangeOfMind):
         self.t_seen = None      # time of the last observation offered (used or skipped)
         self._joint = None      # p(k, alpha_m | D), computed with each update
         self._t_chain = 0.0     # the latest sample's time the change points have seen
+        self._marginals = None  # log p(D) after each sample of the latest offer_many
         for changes in self._chains():
             changes.reset()
         self._smallest = 0.0    # smallest p(k, alpha_m | D) of a tracked hypothesis (0: unknown)

@@ -127,15 +127,6 @@ class ChangePoints:
         return switching_joint(log_prior, loglik, n, hypothesis, n_alpha, self.n_components,
                                self._stay, self._offset, self._loglik, self._component, out)
 
-    def split(self, onset_evidence):
-        """(the probability that no change happened since the onset, p(k, a change since) (K,)):
-        the two parts of the belief."""
-        onset, started = self.masses(onset_evidence)
-        per_k = grouped_logsumexp(started, self._component, self.n_components)
-        top = max(onset.max(), per_k.max())
-        total = np.exp(onset - top).sum() + np.exp(per_k - top).sum()
-        return float(np.exp(onset - top).sum() / total), np.exp(per_k - top) / total
-
     def lines(self, component: int, onset_evidence):
         """What component k is predicted from: (the share of its hypotheses since the onset,
         started columns of k (indices), their shares; the shares sum to 1). The pattern the

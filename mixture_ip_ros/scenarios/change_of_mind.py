@@ -34,7 +34,7 @@ from mixture_ip_ros.core.splice import BLEND, splice
 from mixture_ip_ros.io.bags import RawRecording, read_bag, write_demonstration_bag
 from mixture_ip_ros.io.dataset import resample_wrist, segment_recording
 from mixture_ip_ros.robot.description import JOINT_NAMES
-from mixture_ip_ros.scenarios.folders import LABEL_FILE
+from mixture_ip_ros.scenarios.folders import LABEL_FILE, read_label_entry
 
 SCENARIO = 'change_of_mind'
 FIRST_KEY = 'mixture_ip_ros.first'
@@ -166,12 +166,4 @@ def read_splices(folder) -> dict:
     """{bag name: {'first_bag', 'second_bag', 'first', 'second', 'share',
     'change_after_onset_s', 'duration_s'}} of a folder :func:`write_change_of_mind_bags`
     wrote (evaluation only)."""
-    path = Path(folder) / LABEL_FILE
-    try:
-        data = json.loads(path.read_text())
-        splices = data['splices']
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise ValueError(f'cannot read the splices from {path}: {exc}') from exc
-    if not isinstance(splices, dict):
-        raise ValueError(f'{path}: "splices" must map bag names to their recipes')
-    return splices
+    return read_label_entry(folder, 'splices', 'their recipes')

@@ -72,14 +72,19 @@ def read_scenario_robot(folder) -> str:
     return str(data.get('robot', DEFAULT_ROBOT)) if isinstance(data, dict) else DEFAULT_ROBOT
 
 
-def read_labels(folder) -> dict:
-    """{bag name: label} from a scenario folder's labels.json (evaluation only)."""
+def read_label_entry(folder, key: str, what: str) -> dict:
+    """The object under ``key`` of a scenario folder's labels.json, keyed by bag name;
+    ValueError naming ``what`` it should hold when it cannot be read or is no object."""
     path = Path(folder) / LABEL_FILE
     try:
-        data = json.loads(path.read_text())
-        labels = data['labels']
+        entry = json.loads(path.read_text())[key]
     except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise ValueError(f'cannot read labels from {path}: {exc}') from exc
-    if not isinstance(labels, dict):
-        raise ValueError(f'{path}: "labels" must map bag names to labels')
-    return {str(k): str(v) for k, v in labels.items()}
+        raise ValueError(f'cannot read {key} from {path}: {exc}') from exc
+    if not isinstance(entry, dict):
+        raise ValueError(f'{path}: "{key}" must map bag names to {what}')
+    return entry
+
+
+def read_labels(folder) -> dict:
+    """{bag name: label} from a scenario folder's labels.json (evaluation only)."""
+    return {str(k): str(v) for k, v in read_label_entry(folder, 'labels', 'labels').items()}
