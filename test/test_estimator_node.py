@@ -38,7 +38,10 @@ HELD_OUT = (0, 13, 30)
 ONSET_NS = 1_000_000_000_000          # observation stamps: onset + t
 FRAME = 'iiwa_link_0'
 # Timers that never fire during a test: replans and diagnostics are driven by hand.
-MANUAL = {'replan_rate_hz': 0.01, 'diagnostics_period': 3600.0, 'replan_on_observation': False}
+# Replans by hand; trajectories are whole plans (horizon 0), checked against the estimator
+# (test_a_trajectory_follows_the_plan_to_its_horizon_then_stops checks the cut).
+MANUAL = {'replan_rate_hz': 0.01, 'diagnostics_period': 3600.0, 'replan_on_observation': False,
+          'horizon': 0.0}
 OUTPUTS = {'trajectory': (JointTrajectory, '/joint_trajectory'),
            'path': (Path, '/estimator/predicted_wrist'),
            'posterior': (Float64MultiArray, '/estimator/posterior'),
@@ -232,6 +235,32 @@ def test_interaction_commits_then_replans_and_ends_with_a_final_plan(estimator, 
     e.node.publish_diagnostics()
     e.wait_for('diagnostics', 1)
     assert len(e.got['trajectory']) == 2
+
+
+def test_a_trajectory_follows_the_plan_to_its_horizon_then_stops(estimator, trained):
+    model_path, held = trained
+    demo = held[1]
+    e = estimator(**{**MANUAL, 'horizon': 0.3})
+    e.event('onset', ONSET_NS)
+    n = int(np.searchsorted(demo.t, 0.4 * demo.duration))
+    e.feed(demo, list(range(n)))
+    e.node.replan()
+    traj = e.wait_for('trajectory', 1)
+    oracle = _oracle(model_path, demo, range(n))
+    t_now = _ns(demo.t[n - 1]) * 1e-9
+    tfs = _absolute_times(traj)
+    pos = np.array([pt.positions for pt in traj.points])
+    vel = np.array([pt.velocities for pt in traj.points])
+    t_end = 1.0 / oracle.alphas[oracle.speed_hypotheses()[0]].min()
+    whole = np.linspace(t_now + 0.1, t_end, 25)
+    before = whole[whole < t_now + 0.3]
+    # the plan's own points up to the horizon, its state there, then at rest
+    assert len(traj.points) == len(before) + 2
+    assert np.allclose(tfs[:-1], np.r_[before, t_now + 0.3], atol=2e-9)
+    assert np.allclose(pos[:len(before)], oracle.expected_controlled(before)[1], atol=1e-9)
+    assert np.abs(vel[-2]).max() > 0.0 and not vel[-1].any()
+    assert tfs[-1] < t_now + 0.3 + 0.5
+    assert e.node.planner.counts.plans_uncut == 0
 
 
 def test_markers_show_every_component_and_the_planned_hand(estimator, trained):

@@ -21,18 +21,15 @@ with at least ``min_observations`` observations used and, given calibrated novel
 changes (the controller blends from its current state into the new plan), until the movement
 stops being explained: then the robot holds and the interaction ends ('unexplained').
 
-Stale inputs (estimation.stale_inputs): no plan from an arm state older than
-``max_joint_state_age``; an interaction without wrist observations for ``max_wrist_silence``
-ends ('wrist_silent'). Each spell is counted once, its Step carrying one ``notice`` to log.
+Stale inputs (estimation.stale_inputs) send no plan or end the interaction, each spell counted
+once, its Step carrying one ``notice`` to log. The controller gets each plan within its
+``horizon`` (estimation.horizon), so an arm the planner stops extending comes to rest.
 
 Hedging (``hedge``): when only the confidence is missing, the plan with the component
-marginalised too is sent (every likely interaction's expected path weighted by p(k | D), the
-best prediction under squared error while the interaction is uncertain), so the robot is under
-way when it commits. Where the interaction comes to its point early (a handshake's hands can
-meet 1.5 s after its onset in NuiSI v2) the arm could not arrive in time from rest at
-commitment. Hedged plans are not a commit: they stop with a hold like committed ones when the
-movement is unexplained, and at the end of an interaction never committed no final plan is
-sent (the arm stays on the last one's final posture).
+marginalised too is sent (each likely interaction's expected path weighted by p(k | D)), so the
+robot is under way when it commits: a handshake's hands can meet 1.5 s after its onset, too
+soon for an arm starting from rest at the commit. Hedged plans are no commit: an unexplained
+movement stops them with a hold, and an interaction never committed gets no final plan.
 
 A replay stopped or restarted ends the interaction without an error (estimation.stream_clock):
 an 'end' that comes when the clock has gone on past observations that came on it, or back
@@ -48,11 +45,12 @@ import numpy as np
 
 from mixture_ip_ros.core.novelty import NoveltyMonitor, NoveltyThresholds
 from mixture_ip_ros.estimation.held import HeldSamples
+from mixture_ip_ros.estimation.horizon import within_horizon
 from mixture_ip_ros.estimation.planner_settings import PlannerSettings
 from mixture_ip_ros.estimation.plans import (JointLimits, Plan, PosteriorSummary, build_plan,
                                              check_plan, end_summary, posterior_summary,
                                              within_limits)
-from mixture_ip_ros.estimation.records import Interaction, ObservationCounts, Switch
+from mixture_ip_ros.estimation.records import Interaction, ObservationCounts, Step, Switch
 from mixture_ip_ros.estimation.schedule import ReplanSchedule
 from mixture_ip_ros.estimation.stale_inputs import StaleInputs
 from mixture_ip_ros.estimation.stream_clock import StreamClock
@@ -66,29 +64,6 @@ def should_commit(component_posterior, n_observations: int, confidence_threshold
     """Whether the robot may start: enough evidence and a confident most probable component."""
     return (n_observations >= min_observations
             and float(np.max(component_posterior)) >= confidence_threshold)
-
-
-@dataclass
-class Step:
-    """What one replan produced: always the posterior summary and the plan (its hypothesis is
-    the one of the predicted path); ``send`` says whether the joint trajectory goes out;
-    ``problem`` why the plan may not be published; ``unexplained`` why the movement is none the
-    model knows (no commit; once the robot moves, ``hold``: it must stop where it is).
-    ``trigger_ns``: the stamp of the latest evidence the plan rests on (the observation or the
-    'end' event that brought it). ``withheld``: why a plan that would have gone out did not (the
-    arm's state is stale); ``notice``: a line to log, once per spell of what it reports."""
-
-    summary: PosteriorSummary
-    plan: Optional[Plan]
-    send: bool
-    trigger_ns: int
-    committed_now: bool = False
-    switched_from: Optional[int] = None
-    problem: Optional[str] = None
-    unexplained: Optional[str] = None   # why the model does not explain the movement
-    hold: bool = False                  # stop the robot where it is (unexplained, or silent)
-    withheld: Optional[str] = None
-    notice: Optional[str] = None
 
 
 class OnlinePlanner:
@@ -432,7 +407,14 @@ class OnlinePlanner:
         self.counts.plans_sent += 1
         rec.plans += 1
         return Step(summary, plan, send=True, trigger_ns=trigger, committed_now=committed_now,
-                    switched_from=switched_from)
+                    switched_from=switched_from, command=self._command(plan, t_plan))
+
+    def _command(self, plan: Plan, t_plan: float) -> Plan:
+        horizon = self._settings.horizon
+        command, whole = within_horizon(plan, t_plan + horizon, self.limits if horizon > 0
+                                        else None)
+        self.counts.plans_uncut += whole
+        return command
 
     def _silence(self, now_ns) -> Optional[str]:
         return (self._inputs.silence(now_ns, self._settings.max_wrist_silence)

@@ -21,7 +21,9 @@ class PlannerSettings:
     timed from, at most (the node clock steps with /clock, every 10 ms of the sim, and a plan
     that catches up takes some ms to compute): where the arm catches up, its first point is
     one it still reaches within its limits from then (estimation.plans.build_plan's
-    ``margin``), so that the controller need not re-time it."""
+    ``margin``), so that the controller need not re-time it. ``horizon`` (s, 0 = none): each
+    plan sent follows the path this long past the present, then stops at rest within the joint
+    limits (estimation.horizon); the next replan extends it, so an arm left alone stops."""
 
     confidence_threshold: float = 0.9
     min_observations: int = 3
@@ -38,6 +40,7 @@ class PlannerSettings:
     max_joint_state_age: float = 0.0
     max_wrist_silence: float = 0.0
     delivery_margin: float = 0.05
+    horizon: float = 0.0
 
     def __post_init__(self):
         def need(ok, what):
@@ -56,6 +59,6 @@ class PlannerSettings:
             value = getattr(self, name)
             need(np.isfinite(value) and value > 0, f'{name} must be > 0 s, got {value}')
         for name in ('max_clock_offset', 'max_joint_state_age', 'max_wrist_silence',
-                     'delivery_margin'):
+                     'delivery_margin', 'horizon'):
             value = getattr(self, name)
             need(np.isfinite(value) and value >= 0, f'{name} must be >= 0 s, got {value}')

@@ -1,9 +1,11 @@
-"""What the estimator keeps about its work: one record per interaction, counts of the
-observations it took or refused, and latency statistics (dataclasses, for diagnostics, logs and
-reports)."""
+"""What the estimator keeps about its work: what each replan produced, one record per
+interaction, counts of the observations it took or refused, and latency statistics
+(dataclasses, for diagnostics, logs and reports)."""
 
 from dataclasses import dataclass, field
 from typing import Optional
+
+from mixture_ip_ros.estimation.plans import Plan, PosteriorSummary
 
 # Why the estimator did not use an observation ('skipped', within min_interval of the last one
 # used, is not a rejection).
@@ -17,6 +19,30 @@ PLAN_REFUSALS = ('invalid', 'beyond_limits', 'off_clock')
 
 def _absolute(onset_ns: int, elapsed: Optional[float]) -> Optional[float]:
     return None if elapsed is None else (onset_ns + round(elapsed * 1e9)) * 1e-9
+
+
+@dataclass
+class Step:
+    """What one replan produced: always the posterior summary and the plan (its hypothesis is
+    the one of the predicted path); ``send`` says whether the joint trajectory goes out;
+    ``problem`` why the plan may not be published; ``unexplained`` why the movement is none the
+    model knows (no commit; once the robot moves, ``hold``: it must stop where it is).
+    ``trigger_ns``: the stamp of the latest evidence the plan rests on (the observation or the
+    'end' event that brought it). ``withheld``: why a plan that would have gone out did not (the
+    arm's state is stale); ``notice``: a line to log, once per spell of what it reports."""
+
+    summary: PosteriorSummary
+    plan: Optional[Plan]
+    send: bool
+    trigger_ns: int
+    committed_now: bool = False
+    switched_from: Optional[int] = None
+    problem: Optional[str] = None
+    unexplained: Optional[str] = None   # why the model does not explain the movement
+    hold: bool = False                  # stop the robot where it is (unexplained, or silent)
+    withheld: Optional[str] = None
+    notice: Optional[str] = None
+    command: Optional[Plan] = None      # what the controller gets: the plan within its horizon
 
 
 @dataclass
@@ -103,6 +129,7 @@ class ObservationCounts:
     stale_joint_states: int = 0         # spells of plans not sent: the arm's state too old
     silent_ends: int = 0                # interactions ended: no wrist observation for too long
     clock_resets: int = 0               # interactions ended: the clock jumped back
+    plans_uncut: int = 0                # sent whole: a stop at their horizon left the limits
 
     @property
     def n_rejected(self) -> int:

@@ -44,6 +44,7 @@ def estimation_values(planner, latency, plan_latency, events) -> dict:
         'ends_clock_reset': counts.clock_resets,
         'unexplained': rec and rec.unexplained,
         'plans_time_scaled': counts.plans_time_scaled,
+        'plans_uncut': counts.plans_uncut,
         **{f'plans_refused_{k}': v for k, v in counts.plan_refusals.items()},
         'events_unknown': events['unknown'],
     }

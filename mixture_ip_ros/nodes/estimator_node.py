@@ -7,16 +7,14 @@ Subscribes  observation_topic  geometry_msgs/PointStamped (frame observed_frame)
             joint_state_topic  sensor_msgs/JointState (the arm's state, to time catching up)
 Publishes   trajectory_topic   trajectory_msgs/JointTrajectory, reliable, liveliness_lease:
                 header.stamp = the stamp of the latest observation the plan rests on (the
-                'end' event's for the last plan), joint names of the model, points from
-                the present (plus lookahead) to the end of the slowest phase speed holding the
-                posterior, positions, velocities, accelerations of the expected trajectory with
-                the speed marginalised (estimation.plans); header.stamp + time_from_start =
-                onset + the time of each point. Sent once p(k* | D) >= confidence_threshold
-                with >= min_observations used (with hedge, before that the plan with the
-                component marginalised too), then at replan_rate_hz while new observations
-                arrive, and a last time on 'end'; none while the arm's state is stale.
-                Deactivating, or a wrist stream gone silent, sends an empty trajectory: the
-                controller stops and holds.
+                'end' event's for the last plan), joint names of the model; the expected
+                trajectory with the speed marginalised (estimation.plans) from the present
+                (plus lookahead) for ``horizon`` s, then a stop at rest (estimation.horizon);
+                header.stamp + time_from_start = onset + each point's time. Sent once
+                p(k* | D) >= confidence_threshold with >= min_observations used (with hedge,
+                before that hedged), then at replan_rate_hz while observations arrive, and a
+                last time on 'end'; none while the arm's state is stale. Deactivating, or a
+                wrist stream gone silent, sends an empty trajectory: stop and hold.
             path_topic         nav_msgs/Path: the whole predicted wrist movement under the
                 plan's component at its MAP phase speed alpha*, phases 0..1, pose stamps =
                 onset + z / alpha*.
@@ -143,6 +141,9 @@ class EstimatorParameters:
     max_joint_state_age: float = param(0.5, 's of the node clock: an older arm state sends no '
                                             'plan until one comes (0 = no check)', low=0.0,
                                        high=3600.0)
+    horizon: float = param(0.3, 's; trajectories sent follow the plan this long, then stop '
+                                'within the joint limits; replans extend them (0 = whole plans)',
+                           low=0.0, high=60.0)
     max_wrist_silence: float = param(2.5, 's of the node clock without a wrist observation: '
                                           "the interaction ends, the robot holds (above the "
                                           "observer's max_gap; 0 = no check)", low=0.0,
@@ -292,7 +293,8 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
         get = (lambda n: p.get(n)) if partial else (lambda n: getattr(p, n))
         names = ('confidence_threshold', 'min_observations', 'n_points', 'lookahead',
                  'settle_time', 'hold_window', 'backlog_slice', 'replan_on_observation',
-                 'max_clock_offset', 'hedge', 'max_joint_state_age', 'max_wrist_silence')
+                 'max_clock_offset', 'hedge', 'max_joint_state_age', 'max_wrist_silence',
+                 'horizon')
         values = {n: get(n) for n in names if get(n) is not None}
         if get('replan_rate_hz') is not None:
             values['replan_period'] = 1.0 / get('replan_rate_hz')
@@ -424,10 +426,10 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
         onset_ns = self.planner.onset_ns
         plan = step.plan if step.problem is None else None
         if plan is not None and step.send:
-            trigger = step.trigger_ns
+            trigger, command = step.trigger_ns, step.command or plan
             self.trajectory_pub.publish(self._trajectory_encoder.encode(
-                trigger, onset_ns + np.round(plan.times * 1e9).astype(np.int64) - trigger,
-                plan.positions, plan.velocities, plan.accelerations))
+                trigger, onset_ns + np.round(command.times * 1e9).astype(np.int64) - trigger,
+                command.positions, command.velocities, command.accelerations))
             self._sent_any = True
             self.plan_latency.add(time.perf_counter() - t0)
         self.posterior_pub.publish(self._posterior_encoder.encode(step.summary.as_array()))
