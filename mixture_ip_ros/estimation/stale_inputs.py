@@ -3,7 +3,9 @@
 Two rules of the planner (estimation.planner), each with a limit in seconds (0 = no check):
 
 - the arm's state: older than ``max_joint_state_age``, no plan is sent and the robot is not
-  committed, since a plan starts from the arm's present state. An arm never heard from is
+  committed, since a plan starts from the arm's present state. So too for a state received
+  more than that after the present: the clock was reset (a restarted sim restarts the simulated
+  clock) and the state is another arm's, until the new one's comes. An arm never heard from is
   planned for without its state, as before one comes;
 - the wrist stream: an interaction that hears no observation for longer than
   ``max_wrist_silence`` has lost its observer (set above the observer's max_gap, after which
@@ -44,9 +46,12 @@ class StaleInputs:
         if limit <= 0 or not now_ns or self._state_ns is None:
             return None, False
         age = (int(now_ns) - self._state_ns) * 1e-9
-        if age <= limit:
+        if -limit <= age <= limit:
             return None, False
         new, self._told = not self._told, True
+        if age < 0:     # received after the present: on a clock since reset (a sim restarted)
+            return (f'the latest joint state came {-age:.3g} s after the present: the clock '
+                    'was reset, the arm is re-read', new)
         return f'no joint state for {age:.3g} s (max_joint_state_age {limit:g} s)', new
 
     def silence(self, now_ns: Optional[int], limit: float) -> Optional[str]:
