@@ -175,12 +175,24 @@ def basis_rows(z, centers, width):
     return out
 
 
+def lane_array(shape):
+    """An empty float64 array (groups, m LANES) whose rows start on a boundary of LANES doubles
+    (64 bytes, a cache line): an unaligned vload / vstore reads two cache lines, and the state
+    of kalman_update is read and written that way throughout (numpy aligns to 16 bytes)."""
+    size = int(np.prod(shape))
+    buffer = np.empty(size + LANES)
+    start = (-buffer.ctypes.data % (LANES * 8)) // 8
+    return buffer[start:start + size].reshape(shape)
+
+
 def to_lanes(columns):
     """Per-column rows (C, m), C a multiple of LANES, to kalman_update's lane groups
-    (C / LANES, m LANES)."""
+    (C / LANES, m LANES), in a :func:`lane_array`."""
     C, m = columns.shape
-    return np.ascontiguousarray(columns.reshape(C // LANES, LANES, m).transpose(0, 2, 1)
-                                ).reshape(C // LANES, m * LANES)
+    out = lane_array((C // LANES, m * LANES))
+    out.reshape(C // LANES, m, LANES)[...] = columns.reshape(C // LANES, LANES, m
+                                                              ).transpose(0, 2, 1)
+    return out
 
 
 def from_lanes(groups):
@@ -224,10 +236,13 @@ def kalman_update(cov, mu, loglik, n, alpha_index, alphas, phase0, times, center
     cov (groups, d (d + 1) / 2 LANES), mu (groups, d LANES) (see the module's layout); per
     column c: loglik[c], phase speed alphas[alpha_index[c]] and phase phase0[alpha_index[c]]
     at t = 0 (H = I_P kron psi(phase0 + alpha t)^T, eq. 15 with ``centers``, ``width``; phase0
-    is 0 but where a change of mind started a pattern mid-way, core.switching), log_prior[c], and which hypothesis it is, hypothesis[c];
+    is 0 but where a change of mind started a pattern mid-way, core.switching), log_prior[c],
+    and which hypothesis it is, hypothesis[c];
     noise (groups, P LANES) = diag R of each column, in the lane layout (tied across
     components or not).
-    joint (K M,): p(k, alpha_m | D) renormalised over the tracked hypotheses, 0 for the others.
+    joint (K M,): p(k, alpha_m | D) renormalised over the tracked hypotheses, 0 for the others;
+    empty (0,): not computed, and 0.0 returned (a caller with a posterior of its own: the change
+    points' belief, core.switching, and their segments' filters, which have none).
     """
     d = mu.shape[1] // LANES
     J, P = ys.shape
@@ -257,6 +272,8 @@ def kalman_update(cov, mu, loglik, n, alpha_index, alphas, phase0, times, center
                         r, d, P, N, n_rows)
             for lane in range(LANES):
                 trace[obs, g * LANES + lane] = loglik[g * LANES + lane]
+    if joint.shape[0] == 0:
+        return 0.0
     # Posterior over the tracked hypotheses (eq. 16 with the mixture weight in the prior).
     top = -np.inf
     for c in range(n):

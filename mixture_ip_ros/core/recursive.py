@@ -10,7 +10,8 @@ component.
 
 import numpy as np
 
-from ._fast import LANES, compact_lanes, from_lanes, kalman_update, to_lanes, tri_index
+from ._fast import (LANES, compact_lanes, from_lanes, kalman_update, lane_array, to_lanes,
+                    tri_index)
 from .checks import checked_switch_rate
 from .noise import decimated_rows, spaced
 from .numerics import logsumexp, logsumexp_rows
@@ -99,7 +100,7 @@ class RecursivePosterior(ChangeOfMind):
                          if self.switch_rate > 0.0 else None)
         self._noise_k = noise
         self._others = []       # change points of other rates (compare_rates)
-        self._cov, self._mu, self._noise = (np.empty_like(a) for a in
+        self._cov, self._mu, self._noise = (lane_array(a.shape) for a in
                                             (self._cov0, self._mu0, self._noise0))
         self.reset()
 
@@ -198,18 +199,23 @@ class RecursivePosterior(ChangeOfMind):
         self._absorb_many(np.array([float(t)]), y[None])
 
     def _kalman(self, times, values) -> np.ndarray:
-        joint = np.empty(len(self._col))
+        # With changes of mind the joint posterior is the change points' (_set_joint, once
+        # every segment has the samples): the kernel does not make eq. 16's.
+        own = self._changes is None
+        joint = np.empty(len(self._col) if own else 0)
         trace = np.empty((len(times), len(self._loglik)))
         basis = self.model.basis_
-        self._smallest = kalman_update(self._cov, self._mu, self._loglik, self.n_tracked,
-                                       self._alpha_index, self.alphas, self._phase0, times,
-                                       basis.centers, basis.width, values, self._noise,
-                                       self._prior, self._hyp, joint, trace)
+        smallest = kalman_update(self._cov, self._mu, self._loglik, self.n_tracked,
+                                 self._alpha_index, self.alphas, self._phase0, times,
+                                 basis.centers, basis.width, values, self._noise, self._prior,
+                                 self._hyp, joint, trace)
         self.n_observations += len(times)
         self._times.extend(times.tolist())
         self._values.extend(np.array(values))   # copies: the caller may reuse its buffer
-        self._joint = joint.reshape(self.n_components, -1)
-        self._joint.flags.writeable = False
+        if own:
+            self._smallest = smallest
+            self._joint = joint.reshape(self.n_components, -1)
+            self._joint.flags.writeable = False
         return trace[:, :self.n_tracked]
 
     def offer_many(self, times, values) -> np.ndarray:

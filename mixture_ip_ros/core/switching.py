@@ -23,7 +23,7 @@ since the onset, and the belief is eq. 11 with the phase marginalised.
 
 import numpy as np
 
-from ._fast import LANES, kalman_update, to_lanes
+from ._fast import LANES, kalman_update, lane_array, to_lanes
 from ._fast_switching import grouped_logsumexp, switching_joint
 from .numerics import logsumexp, logsumexp_rows
 
@@ -87,12 +87,14 @@ class ChangePoints:
         self._phase0 = np.zeros(len(self._rates))
         self._cov0 = to_lanes(model.covariances_[:, lower[0], lower[1]][pad])
         self._mu0 = to_lanes(model.means_[:, :do][pad])
-        self._cov, self._mu = np.empty_like(self._cov0), np.empty_like(self._mu0)
+        self._cov, self._mu = lane_array(self._cov0.shape), lane_array(self._mu0.shape)
         self._noise = to_lanes(np.broadcast_to(np.asarray(noise, dtype=float), (K, P))[pad])
         self._loglik = np.zeros(len(pad))
-        # each column its own phase function; kalman_update's posterior over them, not read
+        # each column its own phase function; no posterior over them from kalman_update (the
+        # belief sums them with the segment since the onset's)
         self._alpha_index = self._columns = np.arange(len(pad))
-        self._zeros, self._unused = np.zeros(len(pad)), np.empty(len(pad))
+        self._zeros, self._no_joint = np.zeros(len(pad)), np.empty(0)
+        self._scratch = np.empty((1, len(pad)))     # a trace nobody reads (absorb)
         self.reset()
 
     def reset(self):
@@ -101,6 +103,9 @@ class ChangePoints:
         np.copyto(self._mu, self._mu0)
         self._loglik[:] = 0.0
         self._start = np.full(self.max_segments, np.nan)     # start of each slot; NaN: free
+        # columns up to the last slot started (slots are taken in order): the filters of a
+        # slot never started would be reset before they were read, so they are not run
+        self._live = 0
         # log mass of each column before its evidence: log h + log p(D_<tau) + log p(k, pace)
         self._offset = np.full(self._n, -np.inf)
         self._stay = 0.0        # sum of log(1 - h) over the candidates passed
@@ -201,17 +206,23 @@ class ChangePoints:
             self._cov[g].reshape(-1, LANES)[:, lane] = self._cov0[g].reshape(-1, LANES)[:, lane]
             self._mu[g].reshape(-1, LANES)[:, lane] = self._mu0[g].reshape(-1, LANES)[:, lane]
         self._start[slot] = t
+        self._live = max(self._live, (slot + 1) * self.width)
         self.n_started += 1
 
-    def absorb(self, times, values, basis):
+    def absorb(self, times, values, basis, trace: bool = True):
         """Condition every started segment on ``values`` (J, P) at ``times`` (J,); returns each
-        column's log evidence after each sample (J, n) (-inf before any segment started)."""
-        trace = np.full((len(times), len(self._loglik)), -np.inf)
-        if self.n_started:
-            kalman_update(self._cov, self._mu, self._loglik, self._n, self._alpha_index,
+        column's log evidence after each sample (J, n) (-inf before any segment started; the
+        columns of a slot not started yet, whose offset is -inf, read anything), or None with
+        ``trace=False`` (one sample at a time: the belief is read after it, not the trace)."""
+        if not trace and len(times) == 1:
+            out = self._scratch
+        else:
+            out = np.full((len(times), len(self._loglik)), -np.inf)
+        if self._live:
+            kalman_update(self._cov, self._mu, self._loglik, self._live, self._alpha_index,
                           self._rates, self._phase0, times, basis.centers, basis.width, values,
-                          self._noise, self._zeros, self._columns, self._unused, trace)
-        return trace[:, :self._n]
+                          self._noise, self._zeros, self._columns, self._no_joint, out)
+        return out[:, :self._n] if trace else None
 
     def total(self, onset_total: float) -> float:
         """log p(D) of the change-point model, from the segment since the onset's log p(D)."""
@@ -250,7 +261,7 @@ class ChangeOfMind:
                 self._start_segments(float(times[0]), chains)
             trace = self._kalman(times, values)
             for chain in chains:
-                chain.absorb(times, values, self.model.basis_)
+                chain.absorb(times, values, self.model.basis_, trace=False)
             self._t_chain = float(times[0])
             if self._changes is not None:
                 self._set_joint()
