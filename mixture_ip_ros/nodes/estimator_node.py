@@ -48,7 +48,8 @@ from mixture_ip_ros.io.cdr import Float64MultiArrayEncoder, JointTrajectoryEncod
 from mixture_ip_ros.io.model_file import load_model
 from mixture_ip_ros.nodes import qos
 from mixture_ip_ros.nodes.diagnostics import PublishesDiagnostics
-from mixture_ip_ros.nodes.estimator_diagnostics import EstimationDiagnostics, finished_report
+from mixture_ip_ros.nodes.estimator_diagnostics import (EstimationDiagnostics, finished_report,
+                                                       sent_lines)
 from mixture_ip_ros.nodes.managed import ManagedNode, run_node
 from mixture_ip_ros.nodes.markers import prediction_markers
 from mixture_ip_ros.nodes.params import (autostart_param, event_topic_param,
@@ -315,7 +316,7 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
 
     @property
     def state(self) -> str:
-        """The interaction state (idle, observing, committed, done)."""
+        """The interaction state (idle, observing, committed, held, done)."""
         return self.planner.state if self.planner is not None else 'idle'
 
     def _now_ns(self) -> int:
@@ -417,11 +418,11 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
         if step.hold:
             self.trajectory_pub.publish(JointTrajectory(joint_names=list(self.params.joint_names)))
             self.get_logger().warning(step.notice or f'the movement is none the model knows any '
-                                      f'more ({step.unexplained}): the robot holds')
+                                      f'more ({step.unexplained}): the robot holds until it is')
         elif step.notice is not None:
             self.get_logger().warning(step.notice)
         elif step.unexplained is not None:
-            self.get_logger().info(f'not committing: {step.unexplained}',
+            self.get_logger().info(f'{self.planner.state}, not moving: {step.unexplained}',
                                    throttle_duration_sec=self.params.log_throttle_sec)
         onset_ns = self.planner.onset_ns
         plan = step.plan if step.problem is None else None
@@ -441,17 +442,8 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
         self._publish_path(plan, onset_ns, step.trigger_ns)
         self._publish_markers(step, onset_ns)
         if step.send:
-            rec = self.planner.current
-            if step.committed_now:
-                self.get_logger().info(
-                    f'committed to component {plan.component}{self._label(plan.component)} '
-                    f'(p = {rec.confidence:.3f}) at phase {rec.commit_phase:.3f} after '
-                    f'{rec.commit_observations} observations, alpha* = {plan.alpha:.3f}/s')
-            if step.switched_from is not None:
-                self.get_logger().info(
-                    f'switching from component {step.switched_from}'
-                    f'{self._label(step.switched_from)} to {plan.component}'
-                    f'{self._label(plan.component)} at phase {rec.phase:.3f}')
+            for line in sent_lines(step, self.planner.current, self._label):
+                self.get_logger().info(line)
 
     def _publish_path(self, plan, onset_ns, stamp_ns) -> None:
         times, positions = predicted_wrist(self.estimator, plan, self.params.n_points)
