@@ -204,6 +204,26 @@ def test_follows_a_simulated_clock_and_holds_while_paused(harness, bag):
     assert pause_ns - step <= extra[shifted[0]] <= pause_ns + step
 
 
+def test_a_simulated_clock_that_jumps_back_ends_the_playback(harness, bag):
+    """A simulation restarted mid-bag restarts its clock: the rest of the bag is not played
+    into the new clock's time (its messages belong to the time that is gone)."""
+    path, t, xyz, _ = bag
+    player = Playback(harness, path, rewrite_stamps=True, use_sim_time=True).player
+    now = SIM_START_NS
+    harness.set_clock(now)
+    player.resume()
+    while player.published < 10:
+        now += 6_000_000
+        harness.set_clock(now)
+        harness.spin_until(lambda: player._clock_seen * 1e9 >= now - 1, what='the clock')
+    sent = player.published
+    harness.set_clock(1_000_000)                           # the restarted simulation's clock
+    harness.spin_until(lambda: player.finished, what='the playback to end')
+    # its clock comes back past where the old one was: nothing more is played
+    harness.set_clock(now + 10**10)
+    assert player.published <= sent + 1 and player.loops_completed == 0
+
+
 def test_params_file_loads(harness, bag):
     from mixture_ip_ros.core.share import config_path
     player = harness.add(BagPlayer(context=harness.context, cli_args=[

@@ -5,7 +5,7 @@ whole plan's; after it the arm comes to rest within the joint limits."""
 import numpy as np
 import pytest
 
-from mixture_ip_ros.estimation.horizon import (STOP_PEAK, MIN_STOP, plan_state,
+from mixture_ip_ros.estimation.horizon import (STOP_MARGIN, STOP_PEAK, MIN_STOP, plan_state,
                                                stop_segment, within_horizon)
 from mixture_ip_ros.estimation.planner import OnlinePlanner, PlannerSettings
 from mixture_ip_ros.estimation.plans import JointLimits, Plan
@@ -67,8 +67,8 @@ def test_the_controller_follows_the_plan_to_the_cut_then_stops_within_the_limits
 def test_a_stop_from_speed_at_zero_acceleration_in_closed_form():
     qd = np.array([0.9, -1.2, 0.3])
     T, end = stop_segment(np.zeros(DOF), qd, np.zeros(DOF), LIMITS)
-    assert T == pytest.approx(max(MIN_STOP, np.max(STOP_PEAK * np.abs(qd)
-                                                   / LIMITS.acceleration)))
+    acceleration = LIMITS.acceleration * (1 - STOP_MARGIN)
+    assert T == pytest.approx(max(MIN_STOP, np.max(STOP_PEAK * np.abs(qd) / acceleration)))
     np.testing.assert_allclose(end, qd * T / 2)
     # the quintic with zero acceleration at both ends: speed v (1 - 3 s^2 + 2 s^3)
     plan = Plan(times=np.array([0.0, T]), phases=np.zeros(2),
@@ -81,7 +81,7 @@ def test_a_stop_from_speed_at_zero_acceleration_in_closed_form():
                                    atol=1e-12)
     # the joint that needs longest brakes at its acceleration limit, at s = 1/2
     j = int(np.argmax(np.abs(qd) / LIMITS.acceleration))
-    assert abs(plan_state(plan, T / 2)[2][j]) == pytest.approx(LIMITS.acceleration[j])
+    assert abs(plan_state(plan, T / 2)[2][j]) == pytest.approx(acceleration[j])
 
 
 def test_what_is_not_cut():
@@ -97,26 +97,38 @@ def test_what_is_not_cut():
     assert sent.times[0] == plan.times[0] and len(sent.times) == 2
 
 
-def test_a_stop_that_would_leave_the_position_limits_sends_the_whole_plan():
+def test_where_no_stop_keeps_within_the_limits_the_cut_moves_back_or_the_plan_goes_whole():
     t = np.linspace(0.0, 1.0, 5)
     up = np.outer(t, np.full(DOF, 0.2))            # every joint up at 0.2 rad/s
     vel = np.full((5, DOF), 0.2)
     vel[-1] = 0.0
     plan = Plan(times=t, phases=t, positions=up, velocities=vel,
                 accelerations=np.zeros((5, DOF)), component=0, alpha=1.0, final=False)
+
+    def limited(upper_1):
+        upper = LIMITS.upper.copy()
+        upper[1] = upper_1
+        return JointLimits(LIMITS.lower, upper, LIMITS.velocity, LIMITS.acceleration)
     q, qd, qdd = plan_state(plan, 0.5)
     _, rest = stop_segment(q, qd, qdd, LIMITS)
-    upper = LIMITS.upper.copy()
-    upper[1] = 0.5 * (q[1] + rest[1])              # the stop would come to rest beyond it
-    tight = JointLimits(LIMITS.lower, upper, LIMITS.velocity, LIMITS.acceleration)
-    assert within_horizon(plan, 0.5, tight) == (plan, True)
-    assert within_horizon(plan, 0.5, LIMITS)[1] is False
+    # the stop from 0.5 would come to rest beyond joint 1's limit: cut at the point before
+    tight = limited(0.5 * (q[1] + rest[1]))
+    sent, whole = within_horizon(plan, 0.5, tight)
+    assert not whole and sent.times[-2] == 0.25 and sent.positions[-1, 1] < tight.upper[1]
+    assert within_horizon(plan, 0.5, LIMITS)[0].times[-2] == 0.5
+    # from there too: the whole plan, reported
+    q, qd, qdd = plan_state(plan, 0.25)
+    _, rest = stop_segment(q, qd, qdd, LIMITS)
+    assert within_horizon(plan, 0.5, limited(0.5 * (q[1] + rest[1]))) == (plan, True)
+    # a plan that comes to rest by the stop's end anyway goes whole, and is no failure
+    assert within_horizon(plan, 1.0 - 1e-3, LIMITS) == (plan, False)
     # where the plan's quintic between two points is beyond the acceleration limits (into its
-    # last point, at rest) no stop starts within them: the whole plan (it ends soon)
+    # last point, at rest) no stop starts there: the cut moves to the point before
     q, qd, qdd = plan_state(plan, 0.95)
     assert np.abs(qdd).max() > 3.0
     slow = JointLimits(LIMITS.lower, LIMITS.upper, LIMITS.velocity, np.full(DOF, 3.0))
-    assert within_horizon(plan, 0.95, slow) == (plan, True)
+    sent, whole = within_horizon(plan, 0.95, slow)
+    assert not whole and sent.times[-2] == 0.75
 
 
 class _Estimator:

@@ -40,6 +40,16 @@ def segment_coefficients(T, p0, v0, a0, p1, v1, a1, kind: str) -> np.ndarray:
     return c
 
 
+def segment_state(c: np.ndarray, s):
+    """(positions, velocities, accelerations) of the segment with coefficients ``c`` (6, dof)
+    at ``s`` s from its start: a scalar gives rows (dof,), an array (m, 1) rows (m, dof)."""
+    s = np.asarray(s, dtype=float)
+    pos = c[0] + s * (c[1] + s * (c[2] + s * (c[3] + s * (c[4] + s * c[5]))))
+    vel = c[1] + s * (2 * c[2] + s * (3 * c[3] + s * (4 * c[4] + s * 5 * c[5])))
+    acc = 2 * c[2] + s * (6 * c[3] + s * (12 * c[4] + s * 20 * c[5]))
+    return pos, vel, acc
+
+
 def segment_kind(has_v0, has_a0, has_v1, has_a1) -> str:
     """JTC's segment between two points: quintic with velocities and accelerations at both
     ends, cubic with velocities, else linear."""

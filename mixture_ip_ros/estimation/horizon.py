@@ -14,8 +14,14 @@ cut (positions, speeds and accelerations on the plan's own quintic between its p
 rest: from speed v at zero acceleration its speed falls as v (1 - 3 s^2 + 2 s^3), s = t / T,
 peak deceleration 1.5 v / T, so T = 1.5 |qd| / a puts the joint that needs longest at its
 limit; T is lengthened until every joint keeps within its speed and acceleration limits from
-the state it has. A single-point plan (the final posture, or an arm
-catching up to one point) is not cut: it ends at rest already.
+the state it has. It carries on along the present direction for qd T / 2 (0.75 v^2 / a from
+zero acceleration: 2.4 cm of a 0.8 m arm at 1.4 rad/s and the iiwa's 62 rad/s^2), which may be
+past where the plan curves or slows; a plan that comes to rest by the stop's end anyway is sent
+whole. A single-point plan (the final posture, or an arm catching up to one point) is not cut:
+it ends at rest already. The sim's own stop when its commander is gone
+(robot.trajectory.stopping_trajectory) starts from the measured positions and speeds, which
+the controller blends from with a cubic (constant deceleration); this one starts from the
+plan's state, acceleration included, hence a quintic.
 """
 
 from dataclasses import replace
@@ -23,7 +29,7 @@ from typing import Optional, Tuple
 
 import numpy as np
 
-from mixture_ip_ros.estimation.blending import segment_coefficients
+from mixture_ip_ros.estimation.blending import segment_coefficients, segment_state
 from mixture_ip_ros.estimation.plans import JointLimits, Plan, check_plan
 
 # Peak deceleration of the quintic stop from speed v over T, at zero acceleration at both ends:
@@ -35,6 +41,9 @@ STOP_SAMPLES = 64
 STOP_GROWTH = 1.05
 # The shortest stop (s): a plan already at rest at the cut still gets a last segment.
 MIN_STOP = 0.02
+# The stop keeps this far (relative) within the speed and acceleration limits at its samples,
+# so that it is within them between the samples too.
+STOP_MARGIN = 1e-3
 # A point of the plan this close before the cut gives way to the cut's (times are sent in whole
 # nanoseconds and must increase).
 CUT_GAP = 1e-6
@@ -50,35 +59,31 @@ def plan_state(plan: Plan, t: float):
     c = segment_coefficients(T, plan.positions[i], plan.velocities[i], plan.accelerations[i],
                              plan.positions[i + 1], plan.velocities[i + 1],
                              plan.accelerations[i + 1], 'quintic')
-    s = float(np.clip(t - times[i], 0.0, T))
-    powers = s ** np.arange(6)
-    return (powers @ c, np.arange(1, 6) * powers[:5] @ c[1:],
-            np.arange(2, 6) * np.arange(1, 5) * powers[:4] @ c[2:])
+    return segment_state(c, float(np.clip(t - times[i], 0.0, T)))
 
 
 def stop_segment(q, qd, qdd, limits: JointLimits):
     """(duration, positions at rest) of the quintic stop from (``q``, ``qd``, ``qdd``): the
     shortest of durations growing by STOP_GROWTH from ``STOP_PEAK |qd| / a`` whose speeds and
-    accelerations, sampled after its start, keep within ``limits``; it comes to rest at
+    accelerations, sampled after its start, keep within ``limits`` less STOP_MARGIN (the
+    samples' margin for the peaks between them); it comes to rest at
     ``q + qd T / 2 + qdd T^2 / 12``, where the speed's profile above (with the starting
     acceleration's own share) ends. ValueError when no duration does (a start beyond the
     limits: the plan's quintic between two points can exceed what its points respect), or the
     stop's positions leave the position limits."""
     q, qd, qdd = (np.asarray(x, dtype=float) for x in (q, qd, qdd))
-    T = max(MIN_STOP, float(np.max(STOP_PEAK * np.abs(qd) / limits.acceleration)))
-    s = np.linspace(0.0, 1.0, STOP_SAMPLES)[:, None]
-    zero = np.zeros_like(q)
-    if np.any(np.abs(qdd) > limits.acceleration) or np.any(np.abs(qd) > limits.velocity):
+    velocity = limits.velocity * (1.0 - STOP_MARGIN)
+    acceleration = limits.acceleration * (1.0 - STOP_MARGIN)
+    if np.any(np.abs(qdd) > acceleration) or np.any(np.abs(qd) > velocity):
         raise ValueError('the stop starts beyond the joint speed or acceleration limits')
+    T = max(MIN_STOP, float(np.max(STOP_PEAK * np.abs(qd) / acceleration)))
+    s = np.linspace(0.0, 1.0, STOP_SAMPLES)[1:, None]
+    zero = np.zeros_like(q)
     for _ in range(200):
         end = q + qd * T / 2 + qdd * T * T / 12
         c = segment_coefficients(T, q, qd, qdd, end, zero, zero, 'quintic')
-        u = s * T
-        vel = c[1] + 2 * c[2] * u + 3 * c[3] * u ** 2 + 4 * c[4] * u ** 3 + 5 * c[5] * u ** 4
-        acc = 2 * c[2] + 6 * c[3] * u + 12 * c[4] * u ** 2 + 20 * c[5] * u ** 3
-        if (np.all(np.abs(acc[1:]) <= limits.acceleration)
-                and np.all(np.abs(vel[1:]) <= limits.velocity)):
-            pos = c[0] + c[1] * u + c[2] * u ** 2 + c[3] * u ** 3 + c[4] * u ** 4 + c[5] * u ** 5
+        pos, vel, acc = segment_state(c, s * T)
+        if np.all(np.abs(acc) <= acceleration) and np.all(np.abs(vel) <= velocity):
             if np.any(pos < limits.lower) or np.any(pos > limits.upper):
                 raise ValueError('the stop leaves the joint position limits')
             return T, end
@@ -88,26 +93,35 @@ def stop_segment(q, qd, qdd, limits: JointLimits):
 
 def within_horizon(plan: Plan, t_cut: float, limits: Optional[JointLimits]) -> Tuple[Plan, bool]:
     """(what the controller gets, whether the plan had to go whole): the plan's points before
-    ``t_cut`` (s since onset), its state at ``t_cut`` and a stop to rest within ``limits``. The
-    plan itself when it has a single point, ends by ``t_cut`` or there are no limits; also,
-    reported, when the stop would leave the joint limits (the arm runs on to its end unless a
+    the cut, its state at the cut and a stop to rest within ``limits``. The cut is at ``t_cut``
+    (s since onset), or where no stop within the limits starts there (the plan's quintic
+    between two points can exceed what its points respect), at its latest point before. The
+    plan itself when it has a single point, it ends by ``t_cut`` or comes to rest by the end
+    of the stop anyway (no stop then carries on past its path), or there are no limits; also,
+    reported, when no stop keeps within the joint limits (the arm runs on to its end unless a
     replan comes). A cut before the plan's first point is made at that point (the arm is still
     blending into it)."""
     if limits is None or len(plan.times) < 2 or plan.times[-1] <= t_cut:
         return plan, False
     t_cut = max(float(t_cut), float(plan.times[0]))
-    q, qd, qdd = plan_state(plan, t_cut)
-    keep = plan.times < t_cut - CUT_GAP
-    try:
-        T, rest = stop_segment(q, qd, qdd, limits)
-    except ValueError:
-        return plan, True
-    zero = np.zeros((1, len(q)))
-    phase_cut = float(np.interp(t_cut, plan.times, plan.phases))
-    cut = replace(
-        plan, times=np.r_[plan.times[keep], t_cut, t_cut + T],
-        phases=np.r_[plan.phases[keep], phase_cut, phase_cut],
-        positions=np.vstack([plan.positions[keep], q, rest]),
-        velocities=np.vstack([plan.velocities[keep], qd, zero]),
-        accelerations=np.vstack([plan.accelerations[keep], qdd, zero]))
-    return (plan, True) if check_plan(cut) is not None else (cut, False)
+    earlier = plan.times[plan.times < t_cut - CUT_GAP][::-1]
+    for at in (t_cut, *earlier[:1]):
+        q, qd, qdd = plan_state(plan, at)
+        try:
+            T, rest = stop_segment(q, qd, qdd, limits)
+        except ValueError:
+            continue
+        if plan.times[-1] <= at + T:
+            return plan, False
+        keep = plan.times < at - CUT_GAP
+        zero = np.zeros((1, len(q)))
+        phase = float(np.interp(at, plan.times, plan.phases))
+        cut = replace(
+            plan, times=np.r_[plan.times[keep], at, at + T],
+            phases=np.r_[plan.phases[keep], phase, phase],
+            positions=np.vstack([plan.positions[keep], q, rest]),
+            velocities=np.vstack([plan.velocities[keep], qd, zero]),
+            accelerations=np.vstack([plan.accelerations[keep], qdd, zero]))
+        if check_plan(cut) is None:
+            return cut, False
+    return plan, True

@@ -23,7 +23,8 @@ class PlannerSettings:
     one it still reaches within its limits from then (estimation.plans.build_plan's
     ``margin``), so that the controller need not re-time it. ``horizon`` (s, 0 = none): each
     plan sent follows the path this long past the present, then stops at rest within the joint
-    limits (estimation.horizon); the next replan extends it, so an arm left alone stops."""
+    limits (estimation.horizon); the next replan extends it, so an arm left alone stops (one
+    shorter than a replan period and the command's delivery stops the arm between plans)."""
 
     confidence_threshold: float = 0.9
     min_observations: int = 3

@@ -26,11 +26,12 @@ class StaleInputs:
     def __init__(self):
         self._state_ns = None   # the arm's latest state came
         self._told = False      # the present spell of a stale state was told
+        self._reset = False     # the clock was reset since it came: stale until the next
         self._heard_ns = None   # the interaction's latest wrist observation came
 
     def joint_state(self, now_ns: Optional[int]) -> None:
         self._state_ns = int(now_ns) if now_ns else None
-        self._told = False
+        self._told = self._reset = False
 
     def heard(self, now_ns: Optional[int]) -> None:
         """A wrist observation came (``now_ns`` None or 0: the time is not known)."""
@@ -46,12 +47,15 @@ class StaleInputs:
         if limit <= 0 or not now_ns or self._state_ns is None:
             return None, False
         age = (int(now_ns) - self._state_ns) * 1e-9
-        if -limit <= age <= limit:
+        if -limit <= age <= limit and not self._reset:
             return None, False
         new, self._told = not self._told, True
-        if age < 0:     # received after the present: on a clock since reset (a sim restarted)
-            return (f'the latest joint state came {-age:.3g} s after the present: the clock '
-                    'was reset, the arm is re-read', new)
+        # received after the present: on a clock since reset (a sim restarted), which the
+        # new clock may come back to without a new state
+        self._reset = self._reset or age < -limit
+        if self._reset:
+            return ('the latest joint state came on the clock before it was reset: the arm '
+                    'is re-read', new)
         return f'no joint state for {age:.3g} s (max_joint_state_age {limit:g} s)', new
 
     def silence(self, now_ns: Optional[int], limit: float) -> Optional[str]:

@@ -23,7 +23,9 @@ Pacing: playback runs in its own thread that sleeps on the monotonic clock until
 due (no busy wait). With ``use_sim_time`` the player follows the node's simulated clock instead
 (checked every 2 ms): it starts at the first /clock it receives and publishes each message when
 the simulated time reaches its recorded offset / rate, so playback stays in step with a
-simulator running slower or faster than real time, and stops while the simulation does.
+simulator running slower or faster than real time, and stops while the simulation does. A
+simulated clock that jumps back (a simulation restarted) ends the playback: the rest of the bag
+belongs to the time that is gone.
 """
 
 from collections import deque
@@ -72,6 +74,9 @@ def parse_remaps(entries, what: str = 'remap') -> dict:
 
 
 SIM_POLL = 0.002  # s between looks at a simulated clock
+# A simulated clock that goes back further than this (s) was restarted: the bag's time on it is
+# gone, and the rest of the pass is not played into the new clock.
+CLOCK_JUMP_BACK = 1.0
 
 
 def _to_time(ns: int) -> Time:
@@ -170,6 +175,7 @@ class BagPlayer(Node):
         self.loops_completed = 0
         self.max_lateness = 0.0  # seconds a message went out after it was due
         self.paused_total = 0.0  # seconds of the pacing clock spent paused during playback
+        self._clock_seen = 0.0   # the latest pacing-clock reading (s)
         self.holding = False     # the playback thread is waiting in a pause
         self.recent_lateness = deque(maxlen=10000)  # per message, seconds (negative = early)
         self.first_sent = self.last_sent = None     # monotonic times of first / last publish
@@ -251,7 +257,14 @@ class BagPlayer(Node):
                     shift[0] += paused
                     self.paused_total += paused
                     continue
-                remaining = due + shift[0] - self._now()
+                now = self._now()
+                if self._sim_time and now < self._clock_seen - CLOCK_JUMP_BACK:
+                    self.get_logger().warning(
+                        f'the simulated clock jumped back from {self._clock_seen:.3f} s to '
+                        f'{now:.3f} s (a restarted simulation): playback stopped')
+                    return False
+                self._clock_seen = max(self._clock_seen, now)
+                remaining = due + shift[0] - now
                 if remaining <= 0:
                     return True
                 self._cond.wait(min(remaining, SIM_POLL) if self._sim_time else remaining)
