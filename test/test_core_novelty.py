@@ -68,43 +68,6 @@ def test_a_second_reach_without_a_rest_is_refused_soon_after_it_starts(patterns)
     assert flag is not None and n_first < flag <= n_first + 2 * thresholds.window_size
 
 
-def _judged(thresholds, densities):
-    """monitor.unexplained() after each observation whose log predictive density is given (the
-    log marginal is their running sum)."""
-    monitor = NoveltyMonitor(thresholds)
-    out = []
-    for n, lm in enumerate(np.cumsum(densities), start=1):
-        monitor.record(n, lm)
-        out.append(monitor.unexplained())
-    return out
-
-
-def test_after_a_turn_what_follows_is_judged_on_its_own():
-    """Densities by hand: a movement explained over a window (10 nats each), a turn (-50), then
-    explained again (8 each, above the settled prefix threshold 7 and the window threshold 3).
-    After the turn the prefix is the mean since the last unexplained window: explained once
-    3 observations came after it, whatever the turn cost the whole prefix."""
-    th = NoveltyThresholds(np.array([0.0, 0.0, 0.0, 7.0]), 3.0, window_size=3)
-    got = _judged(th, [10] * 4 + [-50] * 2 + [8] * 8)
-    assert got[:4] == [None] * 4
-    assert all(why is not None for why in got[4:9])
-    # windows ending at the 6th, 7th and 8th observation hold a -50: the last unexplained
-    # window ends at the 8th; three more come after it, their mean 8 >= 7
-    assert got[8:10] == ['1 observations explained since the movement turned, fewer than 3',
-                         '2 observations explained since the movement turned, fewer than 3']
-    assert got[10:] == [None] * 4
-    whole = np.cumsum([10] * 4 + [-50] * 2 + [8] * 8)[-1] / 14
-    assert whole < 7.0                               # the whole prefix would still refuse it
-    # after the turn, a mean below the settled threshold stays refused (per-n ones are looser)
-    got = _judged(th, [10] * 4 + [-50] * 2 + [5] * 8)
-    assert got[-1].startswith('log p(D)/n = 5 below 7')
-    # never explained over a whole window (a return to rest): judged whole, from the onset,
-    # still refused where the same densities after a turn are explained
-    got = _judged(th, [-50] * 2 + [10] * 12)
-    assert all(why is not None for why in got)
-    assert got[-1].startswith('log p(D)/n = 1.43 below 7')
-
-
 def test_thresholds_are_validated_and_read_per_number_of_observations():
     th = NoveltyThresholds(np.array([1.0, 2.0, 3.0]), 0.5)
     assert [th.prefix_threshold(n) for n in (1, 3, 40)] == [1.0, 3.0, 3.0]

@@ -66,25 +66,15 @@ class NoveltyMonitor:
     def __init__(self, thresholds: NoveltyThresholds):
         self.thresholds = thresholds
         self._history = deque(maxlen=thresholds.window_size + 1)   # (n, log p(D_1:n))
-        self._since = None    # (n, log p(D_1:n)) the prefix is judged from, after a turn
-        self._known = False   # a whole window was explained
 
     def reset(self) -> None:
         self._history.clear()
-        self._since = None
-        self._known = False
 
     def record(self, n: int, log_marginal: float) -> None:
         """log p(D_1:n) after the n-th observation used (in time order, every one)."""
         if self._history and n <= self._history[-1][0]:
             self._history.clear()          # a new interaction, or its samples re-absorbed
-            if self._since is not None:
-                self._since = (0, 0.0)
         self._history.append((int(n), float(log_marginal)))
-        if self._since is not None:
-            window = self.statistics()[1]
-            if window is None or window < self.thresholds.window:
-                self._since = self._history[-1]
 
     def statistics(self):
         """(prefix, window) statistics of the latest record (window None until there are
@@ -98,40 +88,12 @@ class NoveltyMonitor:
         return prefix, window
 
     def unexplained(self) -> Optional[str]:
-        """Why the observations so far are not explained by the model, or None.
-
-        A movement explained over a whole window that stops being explained has turned (a
-        person who changed their mind, or a movement the model never learned after a good
-        start): from then on the prefix is judged over the observations after the latest one
-        whose window was unexplained, so that the turn does not weigh on the movement that
-        follows it. That movement is explained once at least a window's worth came after the
-        turn, their mean log predictive density at least the lowest a whole held-out movement
-        reached (the settled prefix threshold: the weights are conditioned by then, and a
-        second reach without a rest, which the onset's looser early thresholds would let
-        through, stays refused), and the latest window is explained. A movement never
-        explained is judged whole: a return to rest never is."""
-        why = self._why()
-        if why is None:
-            self._known = self._known or self.statistics()[1] is not None
-        elif self._known and self._since is None:
-            self._since = self._history[-1]
-        return why
-
-    def _why(self) -> Optional[str]:
+        """Why the observations so far are not explained by the model, or None."""
         prefix, window = self.statistics()
         if prefix is None:
             return None
-        n, lm = self._history[-1]
-        if self._since is not None:
-            n0, lm0 = self._since
-            if n - n0 < self.thresholds.window_size:
-                return (f'{n - n0} observations explained since the movement turned, fewer '
-                        f'than {self.thresholds.window_size}')
-            # judged as a whole movement is: the weights are conditioned by now
-            prefix, n = (lm - lm0) / (n - n0), n - n0
-            low = float(self.thresholds.prefix[-1])
-        else:
-            low = self.thresholds.prefix_threshold(n)
+        n = self._history[-1][0]
+        low = self.thresholds.prefix_threshold(n)
         if prefix < low:
             return (f'log p(D)/n = {prefix:.3g} below {low:.3g}, the lowest of held-out '
                     f'training movements after {n} observations')

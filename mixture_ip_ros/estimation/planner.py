@@ -18,10 +18,8 @@ on all the evidence, as if every sample had been conditioned on when it came.
 Commit (:func:`should_commit`): the first plan is sent once p(k* | D) >= ``confidence_threshold``
 with at least ``min_observations`` observations used and, given calibrated novelty thresholds
 (core.novelty), the model explains the movement; afterwards every replan is sent, also when k*
-changes (the controller blends from its current state into the new plan). A movement that
-stops being explained makes the robot hold ('held'), and move again once what came after is
-explained (core.novelty: after a turn to another interaction, what follows it is judged); held
-at its end, the interaction ends 'unexplained'.
+changes (the controller blends from its current state into the new plan), until the movement
+stops being explained: then the robot holds and the interaction ends ('unexplained').
 
 Stale inputs (estimation.stale_inputs) send no plan or end the interaction, each spell counted
 once, its Step carrying one ``notice`` to log. The controller gets each plan within its
@@ -57,7 +55,7 @@ from mixture_ip_ros.estimation.schedule import ReplanSchedule
 from mixture_ip_ros.estimation.stale_inputs import StaleInputs
 from mixture_ip_ros.estimation.stream_clock import StreamClock
 
-STATES = ('idle', 'observing', 'committed', 'held', 'done')
+STATES = ('idle', 'observing', 'committed', 'done')
 MAX_LAG = 1.0   # s; a present further ahead of the latest observation means another clock
 
 
@@ -140,7 +138,7 @@ class OnlinePlanner:
 
     @property
     def active(self) -> bool:
-        return self.state in ('observing', 'committed', 'held')
+        return self.state in ('observing', 'committed')
 
     @property
     def n_held(self) -> int:
@@ -240,7 +238,7 @@ class OnlinePlanner:
             return None
         self._trigger_ns = int(stamp_ns)     # the end is dated back: often before the latest
         step = self.replan(now_ns, final=True, t_end=t_end)
-        self._close('unexplained' if self.state == 'held' else 'end', t_end)
+        self._close('end', t_end)
         return step
 
     def deactivate(self) -> None:
@@ -356,14 +354,12 @@ class OnlinePlanner:
         unexplained = None if self._novelty is None else self._novelty.unexplained()
         if unexplained is not None:
             rec.unexplained = unexplained
-        # Before the commit (or while held): the robot moves on the hedged plan once only
-        # confidence is missing.
-        held = self.state == 'held'
-        waiting = (self.state == 'observing' or held) and (
+        # Before the commit: the robot moves on the hedged plan once only confidence is missing.
+        waiting = self.state == 'observing' and (
             self._backlog or unexplained is not None
             or not should_commit(summary.probabilities, est.n_observations,
                                  s.confidence_threshold, s.min_observations))
-        hedged = (waiting and not held and s.hedge and not ended and not self._backlog
+        hedged = (waiting and s.hedge and not ended and not self._backlog
                   and unexplained is None and est.n_observations >= s.min_observations)
         plan = build_plan(est, t_plan, n_points=s.n_points, lookahead=s.lookahead,
                           settle_time=s.settle_time, component=k,
@@ -378,14 +374,11 @@ class OnlinePlanner:
         if problem is not None:
             return Step(summary, plan, send=False, trigger_ns=trigger, problem=problem)
         plan = sendable
-        if unexplained is not None and not held and (self.state == 'committed'
-                                                     or rec.hedged_plans):
+        if unexplained is not None and (self.state == 'committed' or rec.hedged_plans):
             # The robot moves, and what the person does now is no movement the model knows: it
-            # stops where it is, until the movement is explained again (a person who turned to
-            # another interaction: core.switching), judged on what came after the turn.
+            # stops where it is; this interaction gets no more plans.
             self.counts.holds += 1
-            rec.holds += 1
-            self.state = rec.state = 'held'
+            self._close('unexplained', t_now)
             return Step(summary, plan, send=False, trigger_ns=trigger, hold=True,
                         unexplained=unexplained)
         if waiting and not hedged:
@@ -395,13 +388,8 @@ class OnlinePlanner:
             self.counts.stale_joint_states += new
             return Step(summary, plan, send=False, trigger_ns=trigger, withheld=stale,
                         notice=f'{stale}: no plan is sent until it comes' if new else None)
-        committed_now = resumed = False
-        if not waiting and held:
-            resumed = True
-            self.counts.resumes += 1
-            rec.resumes += 1
-            self.state = rec.state = 'committed'
-        if not waiting and rec.commit_phase is None:
+        committed_now = False
+        if not waiting and self.state == 'observing':
             committed_now = True
             self.state = rec.state = 'committed'
             rec.commit_phase, rec.commit_elapsed = summary.phase, t_now
@@ -419,8 +407,7 @@ class OnlinePlanner:
         self.counts.plans_sent += 1
         rec.plans += 1
         return Step(summary, plan, send=True, trigger_ns=trigger, committed_now=committed_now,
-                    switched_from=switched_from, command=self._command(plan, t_plan),
-                    resumed=resumed)
+                    switched_from=switched_from, command=self._command(plan, t_plan))
 
     def _command(self, plan: Plan, t_plan: float) -> Plan:
         horizon = self._settings.horizon
@@ -435,7 +422,7 @@ class OnlinePlanner:
 
     def _end_silent(self, why: str) -> Step:
         """End the interaction whose wrist stream is gone: no plan; a robot that moved holds."""
-        moved = self.state in ('committed', 'held') or self.current.hedged_plans > 0
+        moved = self.state == 'committed' or self.current.hedged_plans > 0
         self.counts.silent_ends += 1
         summary = posterior_summary(self.estimator, self.t_now)
         self._close('wrist_silent', self.t_now)
@@ -472,7 +459,7 @@ class OnlinePlanner:
         next :meth:`replan` (or :meth:`end`) returns its last Step: no plan; a robot that moved
         holds."""
         if self._clock.tick(now_ns, self._settings.max_clock_offset) and self.active:
-            moved = self.state in ('committed', 'held') or self.current.hedged_plans > 0
+            moved = self.state == 'committed' or self.current.hedged_plans > 0
             self.counts.clock_resets += 1
             summary = posterior_summary(self.estimator, self.t_now)
             self._close('clock_reset', None)

@@ -43,7 +43,6 @@ class Step:
     withheld: Optional[str] = None
     notice: Optional[str] = None
     command: Optional[Plan] = None      # what the controller gets: the plan within its horizon
-    resumed: bool = False               # the first plan after a hold: explained again
 
 
 @dataclass
@@ -68,8 +67,7 @@ class Interaction:
     plans sent before it (PlannerSettings.hedge). ``end_reason`` is 'end' (the observer's
     event), 'new_onset' (another interaction started first), 'deactivated' (the node stopped),
     'unexplained' (the movement stopped being one the model knows after the robot started
-    moving, and not explained again by its end: the robot held; ``holds`` and ``resumes``
-    count the holds and the plans sent again once it was), 'stream_stopped' (the observer's 'end' came long after the stream
+    moving: it holds), 'stream_stopped' (the observer's 'end' came long after the stream
     stopped: no last plan) or 'clock_reset' (the clock jumped back); None while it runs. Also
     'wrist_silent': no wrist observation for too long (the observer is gone).
     """
@@ -93,8 +91,6 @@ class Interaction:
     n_rejected: int = 0
     plans: int = 0
     hedged_plans: int = 0
-    holds: int = 0
-    resumes: int = 0
     switches: list = field(default_factory=list)
     gaps: int = 0
     end_reason: Optional[str] = None
@@ -133,7 +129,6 @@ class ObservationCounts:
     stale_joint_states: int = 0         # spells of plans not sent: the arm's state too old
     silent_ends: int = 0                # interactions ended: no wrist observation for too long
     clock_resets: int = 0               # interactions ended: the clock jumped back
-    resumes: int = 0                    # held robots moving again: the movement explained
     plans_uncut: int = 0                # sent whole: a stop at their horizon left the limits
 
     @property

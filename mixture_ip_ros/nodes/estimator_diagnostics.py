@@ -39,7 +39,6 @@ def estimation_values(planner, latency, plan_latency, events) -> dict:
         'plan_latency_max_us': round(plan_latency.max_us, 1),
         'plans_sent': counts.plans_sent,
         'holds_unexplained': counts.holds,
-        'resumes_explained': counts.resumes,
         'stale_joint_states': counts.stale_joint_states,
         'ends_wrist_silent': counts.silent_ends,
         'ends_clock_reset': counts.clock_resets,
@@ -74,12 +73,9 @@ class EstimationDiagnostics:
 
 
 def sent_lines(step, rec, label) -> list:
-    """The lines estimator_node logs when the planner's ``step`` sent a plan: a resumption, the
-    commit, a switch of component; ``rec``: the interaction, ``label(k)``: ' (its label)'."""
+    """The lines estimator_node logs when the planner's ``step`` sent a plan: the commit, a
+    switch of component; ``rec``: the interaction, ``label(k)``: ' (its label)'."""
     plan, lines = step.plan, []
-    if step.resumed:
-        lines.append(f'the movement is explained again: the robot moves, component '
-                     f'{plan.component}{label(plan.component)}')
     if step.committed_now:
         lines.append(f'committed to component {plan.component}{label(plan.component)} '
                      f'(p = {rec.confidence:.3f}) at phase {rec.commit_phase:.3f} after '
@@ -106,6 +102,4 @@ def finished_report(rec, settings, label: str) -> tuple:
     return False, (f'interaction done: component {rec.component}{label}, '
                    f'alpha* = {rec.alpha:.3f}/s, committed at phase {rec.commit_phase:.3f}, '
                    f'{rec.n_observations} observations used, {rec.plans} plans, '
-                   f'{len(rec.switches)} switches'
-                   + (f', held {rec.holds} times, moved again {rec.resumes}' if rec.holds
-                      else ''))
+                   f'{len(rec.switches)} switches')

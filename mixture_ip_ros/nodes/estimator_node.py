@@ -316,7 +316,7 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
 
     @property
     def state(self) -> str:
-        """The interaction state (idle, observing, committed, held, done)."""
+        """The interaction state (idle, observing, committed, done)."""
         return self.planner.state if self.planner is not None else 'idle'
 
     def _now_ns(self) -> int:
@@ -418,11 +418,11 @@ class EstimatorNode(PublishesDiagnostics, ManagedNode):
         if step.hold:
             self.trajectory_pub.publish(JointTrajectory(joint_names=list(self.params.joint_names)))
             self.get_logger().warning(step.notice or f'the movement is none the model knows any '
-                                      f'more ({step.unexplained}): the robot holds until it is')
+                                      f'more ({step.unexplained}): the robot holds')
         elif step.notice is not None:
             self.get_logger().warning(step.notice)
         elif step.unexplained is not None:
-            self.get_logger().info(f'{self.planner.state}, not moving: {step.unexplained}',
+            self.get_logger().info(f'not committing: {step.unexplained}',
                                    throttle_duration_sec=self.params.log_throttle_sec)
         onset_ns = self.planner.onset_ns
         plan = step.plan if step.problem is None else None
