@@ -52,6 +52,26 @@ def harness(ros_context):
         h.close()
 
 
+@pytest.fixture(scope='session')
+def box_loop(tmp_path_factory):
+    """What the closed-loop tests replay: 48 box-assembly bags (seed 3) and a model trained
+    (K = 3) on all but one interaction per pattern, once per session (read only: a test writes
+    what it derives to its own folder). {'data', 'labels', 'held', 'model', 'info'}."""
+    from mixture_ip_ros.app.demo import split_held_out
+    from mixture_ip_ros.app.training import train_to_file
+    from mixture_ip_ros.io.dataset import load_demonstration
+    from mixture_ip_ros.scenarios.folders import read_labels, write_scenario_bags
+    root = tmp_path_factory.mktemp('box_loop')
+    data = root / 'bags'
+    write_scenario_bags('box_assembly', data, seed=3)
+    labels = read_labels(data)
+    train, held = split_held_out(labels, 1, seed=3)
+    model = root / 'model.npz'
+    _, info = train_to_file([load_demonstration(data / n) for n in train], model,
+                            n_components=3)
+    return {'data': data, 'labels': labels, 'held': held, 'model': model, 'info': info}
+
+
 def heldout_loglik(demos, candidates, prior_scales=None, **params):
     """The held-out log-likelihood curve of core.selection.calibrated_heldout_curves alone (no
     completion, no controlled agent's RMS), each K at its calibrated floor."""

@@ -21,7 +21,7 @@ from mixture_ip_ros.io.dataset import load_demonstration
 from mixture_ip_ros.scenarios.change_of_mind import (CHANGE_KEY, FIRST_KEY, SHARE_KEY,
                                                      read_splices, splice_recordings,
                                                      write_change_of_mind_bags)
-from mixture_ip_ros.scenarios.folders import read_labels, write_scenario_bags
+from mixture_ip_ros.scenarios.folders import read_labels
 
 pytestmark = pytest.mark.filterwarnings('ignore::DeprecationWarning')
 # Each pattern turns into another once; the shares span the demo's (0.3 to 0.6).
@@ -34,25 +34,16 @@ SLACK = 0.005
 
 
 @pytest.fixture(scope='module')
-def setup(tmp_path_factory):
-    """48 box-assembly bags; a model trained (K = 3) on all but one interaction per pattern;
-    the three splices of TURNS between the held-out bags."""
-    from mixture_ip_ros.app.demo import split_held_out
-    from mixture_ip_ros.app.training import train_to_file
+def setup(box_loop, tmp_path_factory):
+    """The session's box-assembly bags and model (conftest.box_loop); the three splices of
+    TURNS between the held-out bags."""
     root = tmp_path_factory.mktemp('change_of_mind')
-    data = root / 'bags'
-    write_scenario_bags('box_assembly', data, seed=3)
-    labels = read_labels(data)
-    train, held = split_held_out(labels, 1, seed=3)
-    model = root / 'model.npz'
-    _, info = train_to_file([load_demonstration(data / n) for n in train], model,
-                            n_components=3)
-    bag = {labels[n]: n for n in held}
+    bag = {box_loop['labels'][n]: n for n in box_loop['held']}
     plan = [(bag[a], bag[b], share) for a, b, share in TURNS]
     folder = root / 'splices'
+    data = box_loop['data']
     write_change_of_mind_bags([(data / a, data / b, s) for a, b, s in plan], folder)
-    return {'data': data, 'labels': labels, 'held': held, 'model': model, 'info': info,
-            'folder': folder, 'recipe': read_splices(folder), 'root': root}
+    return {**box_loop, 'folder': folder, 'recipe': read_splices(folder), 'root': root}
 
 
 def _replay(model, setup, held):

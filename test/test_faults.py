@@ -16,7 +16,6 @@ import yaml
 from bench._fault_trials import kill_trial, stray_trial
 from conftest import private_domain_id
 from mixture_ip_ros.core.share import config_path
-from mixture_ip_ros.scenarios.folders import read_labels, write_scenario_bags
 
 pytestmark = pytest.mark.filterwarnings('ignore::DeprecationWarning')
 # A loaded machine notices a lapsed lease later, and the probe sees the kill's joint state
@@ -32,19 +31,9 @@ def _sim_param(name):
 
 
 @pytest.fixture(scope='module')
-def setup(tmp_path_factory):
-    """48 box-assembly bags, a model (K = 3) trained on all but one interaction per pattern."""
-    from mixture_ip_ros.app.demo import split_held_out
-    from mixture_ip_ros.app.training import train_to_file
-    from mixture_ip_ros.io.dataset import load_demonstration
-    root = tmp_path_factory.mktemp('faults')
-    data = root / 'bags'
-    write_scenario_bags('box_assembly', data, seed=3)
-    labels = read_labels(data)
-    train, held = split_held_out(labels, 1, seed=3)
-    model = root / 'model.npz'
-    train_to_file([load_demonstration(data / n) for n in train], model, n_components=3)
-    return model, labels, [data / n for n in held]
+def setup(box_loop):
+    """The session's box-assembly bags and model (conftest.box_loop)."""
+    return box_loop['model'], box_loop['labels'], [box_loop['data'] / n for n in box_loop['held']]
 
 
 def test_a_killed_estimator_leaves_the_arm_at_rest_within_the_lease_and_a_restart_rejoins(

@@ -31,22 +31,13 @@ HAND_BOUND = {'plate': 0.035, 'screwdriver': 0.035, 'screw': 0.04}
 
 
 @pytest.fixture(scope='module')
-def setup(tmp_path_factory):
-    """48 box-assembly bags; a model trained (K = 3) on all but one interaction per pattern."""
-    from mixture_ip_ros.io.dataset import load_demonstration
-    from mixture_ip_ros.app.demo import demonstrated_target, split_held_out
+def setup(box_loop):
+    """The session's box-assembly bags and model (conftest.box_loop), the held-out targets."""
+    from mixture_ip_ros.app.demo import demonstrated_target
     from mixture_ip_ros.robot.kinematics import RobotKinematics
-    from mixture_ip_ros.app.training import train_to_file
-    root = tmp_path_factory.mktemp('closed_loop')
-    data = root / 'bags'
-    write_scenario_bags('box_assembly', data, seed=3)
-    labels = read_labels(data)
-    train, held = split_held_out(labels, 1, seed=3)
-    model = root / 'model.npz'
-    train_to_file([load_demonstration(data / n) for n in train], model, n_components=3)
     kin = RobotKinematics()
-    targets = {n: demonstrated_target(data / n, kin)[0] for n in held}
-    return {'data': data, 'labels': labels, 'held': held, 'model': model, 'targets': targets}
+    targets = {n: demonstrated_target(box_loop['data'] / n, kin)[0] for n in box_loop['held']}
+    return {**box_loop, 'targets': targets}
 
 
 class _Loops:
