@@ -243,6 +243,20 @@ def test_the_evaluate_summary_is_a_small_table_beside_the_baselines():
     assert nuisi.count('K per fold') == 2 and 'v1:' in nuisi and 'v2:' in nuisi
 
 
+def test_the_evaluate_summary_shows_which_pattern_is_taken_for_which():
+    m = _cross_validated()
+    m['recognition_confusion_by_fraction'] = {
+        '0.5': {'a': {'a': 4, 'b': 7, 'component_4': 0}, 'b': {'a': 0, 'b': 11, 'component_4': 1}},
+        '1': {'a': {'a': 11, 'b': 0, 'component_4': 0}, 'b': {'a': 0, 'b': 12, 'component_4': 0}}}
+    text = evaluate_summary(m)
+    assert re.search(r'recognised as, at 50 %\s+a\s+b\s+component_4$', text, re.M)
+    assert re.search(r'^\s+a\s+4\s+7\s+0$', text, re.M)
+    assert re.search(r'^\s+b\s+0\s+11\s+1$', text, re.M)
+    # every recording right at half the movement: no table
+    m['recognition_confusion_by_fraction']['0.5'] = m['recognition_confusion_by_fraction']['1']
+    assert 'recognised as' not in evaluate_summary(m)
+
+
 def test_a_scenario_without_a_table_prints_its_plain_numbers_only():
     text = evaluate_summary({'scenario': 'pole', 'n_components_selected': 2, 'rms_single': 0.25,
                              'side_accuracy_mixture': {'one_sided': 0.95, 'two_sided': None},

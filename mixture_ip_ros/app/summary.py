@@ -164,6 +164,7 @@ def labelled_lines(m) -> list:
         if any(v is not None and v < chance for v in single.values()):
             lines.append('  (one ProMP names every recording with its training majority label, '
                          'so it can score below chance: docs/metrics.md)')
+    lines += confusion_lines(m.get('recognition_confusion_by_fraction') or {})
     unit = next((u for u in ('cm', 'unit') if f'partner_rms_{u}_by_fraction' in m), None)
     if unit is not None:
         rest = [k for k in keys if k != '1']
@@ -176,6 +177,22 @@ def labelled_lines(m) -> list:
             key = f'{prefix}partner_rms_{unit}_by_fraction'
             if key in m:
                 lines.append(_row(label, m[key], rest, lambda x: _num(x, '.1f')))
+    return lines
+
+
+def confusion_lines(by_fraction, key='0.5') -> list:
+    """The recordings of each label (rows) by the label recognised online (columns) at half
+    the movement, when some were taken for another: which pattern is confused with which."""
+    table = by_fraction.get(key)
+    if not table or all(n == 0 for row, counts in table.items() for said, n in counts.items()
+                        if said != row):
+        return []
+    columns = list(next(iter(table.values())))
+    width = max(6, *(len(str(c)) + 1 for c in columns))
+    lines = [f"  {f'recognised as, at {float(key) * 100:.0f} %':<26s}"
+             + ''.join(f'{str(c):>{width}s}' for c in columns)]
+    for row, counts in table.items():
+        lines.append(f'  {str(row):<26s}' + ''.join(f'{counts[c]:>{width}d}' for c in columns))
     return lines
 
 
