@@ -122,6 +122,11 @@ def test_the_model_file_records_the_placement(trained, placement_file):
     assert record['person1_in_world']['yaw'] == pytest.approx(-math.pi / 2, abs=1e-9)
     place = partner_place.PartnerPlace.from_metadata(record)
     assert place.placement.scale == 1.0 and place.config.partner_yaw == -math.pi / 2
+    # and mixture-ip info says so
+    from mixture_ip_ros.app.inspect_model import model_summary
+    text = model_summary(trained)
+    assert "the arm (iiwa14) in the partner's place, from" in text
+    assert 'reach scale 1.000' in text and 'facing -90 deg, in the mocap frame' in text
 
 
 def test_the_arms_joints_reach_the_placed_partners_hand(recordings, placement_file):

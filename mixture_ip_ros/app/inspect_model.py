@@ -38,4 +38,25 @@ def model_summary(path) -> str:
         lines.append('training: no summary stored in this file')
     lines.append('novelty test: ' + ('calibrated' if model.novelty_ is not None else
                                      'none (the estimator cannot tell an unknown movement)'))
+    lines += placement_lines(extra.get('partner_place'))
     return '\n'.join(lines)
+
+
+def placement_lines(place) -> list:
+    """The arm in a partner's place (`train --arm-in-partner-place`), as the model file
+    recorded it (robot.partner_place.PartnerPlace.metadata); none for other models."""
+    if not isinstance(place, dict):
+        return []
+    person = place.get('person1_in_world') or {}
+    xyz, yaw = person.get('xyz'), person.get('yaw')
+    scale = place.get('reach_scale', float('nan'))
+    lines = [f"the arm ({place.get('robot', '?')}) in the partner's place, from "
+             f"{place.get('source', '?')}: reach scale {scale:.3f}"]
+    if xyz is not None and yaw is not None:
+        lines.append(f'  person 1 at ({xyz[0]:.2f}, {xyz[1]:.2f}, {xyz[2]:.2f}) m, facing '
+                     f'{np.degrees(yaw):.0f} deg, in the mocap frame')
+    lag = place.get('flange_to_partner_cm') or {}
+    if 'median' in lag:
+        lines.append(f"  the flange followed the partner's hand within {lag['median']:.1f} cm "
+                     f"(median), {lag.get('p95', float('nan')):.1f} cm (95th percentile)")
+    return lines
