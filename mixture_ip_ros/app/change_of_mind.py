@@ -24,10 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from mixture_ip_ros.app.demo import (demo_folders, interaction_line, loop_latency, make_report,
-                                     plot_demo, prepare_box_demo, render_all, replay_bag,
-                                     report_row)
-from mixture_ip_ros.app.summary import demo_summary, write_json
+from mixture_ip_ros.app.demo import (demo_folders, finish_demo, interaction_line, loop_latency,
+                                     make_report, prepare_box_demo, replay_bag, report_row)
+from mixture_ip_ros.app.summary import demo_summary
 from mixture_ip_ros.io.bags import read_bag
 from mixture_ip_ros.robot.description import DEFAULT_ROBOT, load_description
 from mixture_ip_ros.robot.kinematics import RobotKinematics
@@ -206,14 +205,8 @@ def run(args):
         loop.close()
     report.update({'robot': robot.name, 'command_delay': args.command_delay,
                    'n_components': info['n_components'], 'training': info})
-    write_json(args.json, report)
-    print(demo_summary(report['unchanged']))
-    print(change_summary(report, args.json))
-    plot_demo(records, out_dir)
-    print(f'plots in {out_dir}')
-    if args.render:
-        render_all(records, Path(args.render))
-    return report
+    return finish_demo(records, report, demo_summary(report['unchanged']) + '\n'
+                       + change_summary(report, args.json), args, out_dir)
 
 
 def change_summary(report, json_path=None) -> str:

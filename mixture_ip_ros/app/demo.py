@@ -120,8 +120,14 @@ def run_demo(args):
     report = make_report(records, info, latency)
     report['robot'] = robot.name
     report['command_delay'] = args.command_delay
+    return finish_demo(records, report, demo_summary(report, args.json), args, out_dir)
+
+
+def finish_demo(records, report, summary: str, args, out_dir):
+    """A box-assembly demo's end: the report to ``args.json``, its ``summary`` printed, the
+    plots in ``out_dir``, the videos with ``args.render``; returns the report."""
     write_json(args.json, report)
-    print(demo_summary(report, args.json))
+    print(summary)
     plot_demo(records, out_dir)
     print(f'plots in {out_dir}')
     if args.render:

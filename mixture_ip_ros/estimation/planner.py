@@ -410,9 +410,10 @@ class OnlinePlanner:
                     switched_from=switched_from, command=self._command(plan, t_plan))
 
     def _command(self, plan: Plan, t_plan: float) -> Plan:
-        horizon = self._settings.horizon
-        command, whole = within_horizon(plan, t_plan + horizon, self.limits if horizon > 0
-                                        else None)
+        """What the controller gets: the plan within its horizon (0: the whole plan)."""
+        if self._settings.horizon <= 0:
+            return plan
+        command, whole = within_horizon(plan, t_plan + self._settings.horizon, self.limits)
         self.counts.plans_uncut += whole
         return command
 
