@@ -104,8 +104,8 @@ def within_horizon(plan: Plan, t_cut: float, limits: Optional[JointLimits]) -> T
     if limits is None or len(plan.times) < 2 or plan.times[-1] <= t_cut:
         return plan, False
     t_cut = max(float(t_cut), float(plan.times[0]))
-    earlier = plan.times[plan.times < t_cut - CUT_GAP][::-1]
-    for at in (t_cut, *earlier[:1]):
+    before = plan.times[plan.times < t_cut - CUT_GAP][-1:]     # the plan's point before it
+    for at in (t_cut, *before):
         q, qd, qdd = plan_state(plan, at)
         try:
             T, rest = stop_segment(q, qd, qdd, limits)
