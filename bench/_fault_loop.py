@@ -89,8 +89,11 @@ class Probe:
         self.q.append(np.array(m.position))
         self.qd.append(np.array(m.velocity))
 
-    def _on_plan(self, m):
+    def _on_plan(self, m, info):
+        # sent_ns: when the publisher wrote it (system clock, as kill_ns), so a plan written
+        # before a kill and delivered after it on a loaded machine is not taken as sent after
         self.plans.append({'seq': self.seq, 't': self.now, 'empty': not m.points,
+                           'sent_ns': info['source_timestamp'],
                            'stray': m.header.frame_id == STRAY_FRAME,
                            'command': command_arrays(self.now, m) if m.points else None})
 
@@ -220,6 +223,7 @@ class NodeSet:
     def kill(self, name: str) -> float:
         """SIGKILL ``name``'s process; the simulated time of the latest joint state then."""
         proc = self.proc(name)
+        self.kill_ns = time.time_ns()
         proc.send_signal(signal.SIGKILL)
         self.killed.add(self.keys[name])
         t = self.probe.now

@@ -70,8 +70,8 @@ def _lines(p, since: int, node: str, limit: int = 6) -> list:
     return [line['msg'][:160] for line in p.lines[since:] if line['node'] == node][:limit]
 
 
-def _plans_after(p, since: int) -> dict:
-    after = [c for c in p.plans[since:] if not c['stray']]
+def _plans_after(p, since: int, kill_ns: int) -> dict:
+    after = [c for c in p.plans[since:] if not c['stray'] and c['sent_ns'] > kill_ns]
     return {'plans_after_kill': sum(not c['empty'] for c in after),
             'holds_after_kill': sum(c['empty'] for c in after)}
 
@@ -107,14 +107,14 @@ def kill_trial(model, domain, bag, next_bag, labels, node, phase, log_dir) -> di
             ns.wait(lambda: p.now >= t_kill + window and rested_for(p, 0.5)
                     or p.now >= t_kill + 10.0, 60.0, 'the arm watched after the kill')
             row.update(after_kill(p.t[seq - 1:], p.q[seq - 1:], p.qd[seq - 1:], t_kill, kin))
-            row.update(_plans_after(p, plans_kill))
+            row.update(_plans_after(p, plans_kill, ns.kill_ns))
             # commands the sim took after the kill: its count since its last report before
             # the kill, less the plans that came between that report and the kill
             ns.wait(lambda: latest(p.diagnostics, 'sim_node', p.seq) is not None, 10.0,
                     'a sim report')
             sim_after = latest(p.diagnostics, 'sim_node')
             between = sum(not c['empty'] and not c['stray'] and c['seq'] >= sim_before['seq']
-                          for c in p.plans[:plans_kill])
+                          and c['sent_ns'] <= ns.kill_ns for c in p.plans)
             row['sim_accepted_after_kill'] = (count(sim_after, 'commands_accepted')
                                               - count(sim_before, 'commands_accepted') - between)
             row['sim_holds_source_lost'] = (count(sim_after, 'holds_source_lost')
@@ -145,7 +145,7 @@ def _sim_killed(ns, seq, plans_kill, lines_kill, t_kill, est_before) -> dict:
     what the old bag player and the other nodes do until the old simulated time is passed."""
     p = ns.probe
     ns.watch_wall(SIM_DEAD_WATCH)
-    out = {'joint_states_while_dead': p.seq - seq, **_plans_after(p, plans_kill),
+    out = {'joint_states_while_dead': p.seq - seq, **_plans_after(p, plans_kill, ns.kill_ns),
            'estimator_lines_while_dead': _lines(p, lines_kill, 'estimator_node'),
            'observer_lines_while_dead': _lines(p, lines_kill, 'observer_node')}
     est_dead = latest(p.diagnostics, 'estimator_node')
