@@ -29,7 +29,8 @@ from .inference import PhaseKnownInference
 from .named import named_patterns
 from .numerics import logsumexp_rows
 from .noise import MAX_LAG_S, correlation_time, residual_autocovariance
-from .patterns import PatternMixture, PatternSpace, offset_operators, translation_groups
+from .pattern_space import PatternSpace
+from .patterns import PatternMixture, offset_operators, translation_groups
 from .phase import (alpha_log_density, alpha_m_step, alpha_penalty, alpha_prior_std,
                     timing_variance)
 from .promp import (ObservationStats, covariance_penalty, expected_sq_residual,
@@ -281,7 +282,7 @@ class MixtureIProMP(PhaseKnownInference):
     def _pattern_coordinates(self, data: Prepared):
         space = PatternSpace(self.n_basis, data.n_observed, min_components=self.n_components - 1,
                              translation=self.translation)
-        return space.fit(data.W).transform(data.W)
+        return space.fit_transform(data.W)
 
     def _pattern_mixture(self, X, resp=None, fixed=None):
         return PatternMixture(self.n_components, self.prior_strength, n_init=self.n_init,

@@ -3,22 +3,20 @@
 ProMP weights are not paths. The basis functions overlap, so a weight vector can move a long
 way in directions that barely change its path (eq. 14 with overlapping Gaussians is ill-
 conditioned), and on real recordings those directions vary far more within an interaction than
-the directions that tell interactions apart. Distances between demonstrations are therefore
-taken between their paths: w -> L^T w per DOF, with M = L L^T the basis functions' Gram matrix
-over the phase (:meth:`GaussianBasis.gram`), so that |L^T (w1 - w2)|^2 is the mean squared
-distance between the two paths.
+the directions that tell interactions apart. Demonstrations are therefore compared by their
+paths, aligned in time (core.pattern_space.PatternSpace: a few coordinates per demonstration
+whatever pace each person kept).
 
 A dozen demonstrations per pattern cannot estimate a covariance of 45-150 weights, and a mixture
 fitted there puts every demonstration in a cluster of its own or all in one. Patterns are found
-in a small space instead (:class:`PatternSpace`): each agent's path coordinates scaled to unit
-total variance (a pattern is a movement of both agents, whatever number of DOFs describes
-each), then the principal components that hold ``variance`` (90 %) of the spread. There a
+in those few coordinates instead. There a
 mixture of t distributions (:class:`PatternMixture`; heavy tails, for the atypical recordings
 real people make) has full scale matrices shrunk towards the one pooled within its components
 (``prior_strength`` pseudo-demonstrations, as the weight model's prior), so a component with
 few members borrows the shape the others share. The number of
 patterns is where the leave-one-out log-likelihood of held-out demonstrations in that space
-stops rising (:func:`heldout_curve`, read by ``mixture.selection_curve``).
+stops rising (:func:`heldout_curve`, read by ``mixture.selection_curve``). Where a pair
+stands can be left out of a pattern (:func:`translation_for`, :func:`without_offsets`).
 
 The full Mixture of Interaction ProMPs (core.mixture) starts its EM from these clusters.
 """
@@ -109,75 +107,6 @@ def without_offsets(W, n_basis: int, groups) -> np.ndarray:
         return W
     T, B = offset_operators(n_basis, W.shape[1] // n_basis, groups)
     return W - (W @ T.T) @ B.T
-
-
-def path_coordinates(W, n_basis: int) -> np.ndarray:
-    """Stacked weights W (n, D * N) in the metric of their paths: every DOF's block w_j ->
-    L^T w_j with L the lower Cholesky factor of the basis Gram matrix. (n, D * N)"""
-    W = np.asarray(W, dtype=float)
-    n, d = W.shape
-    if d % n_basis:
-        raise ValueError(f'{d} weights are not a whole number of DOFs of {n_basis} basis functions')
-    L = np.linalg.cholesky(GaussianBasis(n_basis).gram())
-    return (W.reshape(n, d // n_basis, n_basis) @ L).reshape(n, d)
-
-
-class PatternSpace:
-    """The small space patterns are told apart in (see the module docstring): fitted on the
-    weights of training demonstrations, it maps any demonstration's weights into it.
-
-    ``n_observed``: DOFs of the observed agent (the first ``n_observed`` weight blocks), the
-    rest are the controlled agent's. ``min_components``: at least this many principal
-    components (K patterns need K - 1 directions between their means, which need not hold 10 %
-    of the spread when two patterns are close). ``translation``: groups of DOFs whose common
-    offset is no part of a pattern (:func:`translation_for`); each demonstration's is removed
-    (:func:`without_offsets`) before anything else. Fitted attributes: ``mean_`` (D N,),
-    ``scale_`` (D,) per DOF (one value per agent), ``components_`` (q, D N),
-    ``explained_variance_ratio_`` (q,).
-    """
-
-    def __init__(self, n_basis: int, n_observed: int, variance: float = VARIANCE_KEPT,
-                 min_components: int = 1, translation=()):
-        self.n_basis = n_basis
-        self.n_observed = n_observed
-        self.variance = variance
-        self.min_components = min_components
-        self.translation = translation
-
-    def fit(self, W) -> 'PatternSpace':
-        if not 0 < self.variance <= 1:
-            raise ValueError(f'variance must be in (0, 1], got {self.variance!r}')
-        V = path_coordinates(without_offsets(W, self.n_basis, self.translation), self.n_basis)
-        n, d = V.shape
-        D = d // self.n_basis
-        if not 0 < self.n_observed <= D:
-            raise ValueError(f'n_observed must be in 1..{D}, got {self.n_observed!r}')
-        if n < 2:
-            raise ValueError(f'a pattern space needs at least 2 demonstrations, got {n}')
-        self.mean_ = V.mean(axis=0)
-        dof_var = ((V - self.mean_) ** 2).reshape(n, D, self.n_basis).sum(axis=2).mean(axis=0)
-        scale = np.empty(D)
-        for agent in (slice(0, self.n_observed), slice(self.n_observed, D)):
-            scale[agent] = np.sqrt(max(dof_var[agent].sum(), 1e-300))
-        self.scale_ = scale
-        X = self._scaled(V)
-        _, s, vt = np.linalg.svd(X, full_matrices=False)
-        ratio = s ** 2 / max(np.sum(s ** 2), 1e-300)
-        q = int(np.searchsorted(np.cumsum(ratio), self.variance - 1e-12) + 1)
-        q = max(1, min(max(q, self.min_components), n - 1, len(s)))
-        self.components_ = vt[:q]
-        self.explained_variance_ratio_ = ratio[:q]
-        return self
-
-    def _scaled(self, V):
-        n = len(V)
-        X = (V - self.mean_).reshape(n, len(self.scale_), self.n_basis) / self.scale_[:, None]
-        return X.reshape(n, -1)
-
-    def transform(self, W) -> np.ndarray:
-        """(n, q) coordinates of the demonstrations with weights W (n, D N)."""
-        V = path_coordinates(without_offsets(W, self.n_basis, self.translation), self.n_basis)
-        return self._scaled(V) @ self.components_.T
 
 
 def _log_densities(X, means, chols, dof: float):

@@ -23,7 +23,8 @@ from .crossval import fold_scores, k_folds, leave_one_out, n_basis_of, prepare_f
 from .mixture import MixtureIProMP
 from .numerics import first_best, tie_tolerance
 from .parallel import ProgressCount, map_threads
-from .patterns import PatternSpace, heldout_curve, partition_stability
+from .pattern_space import PatternSpace
+from .patterns import heldout_curve, partition_stability
 from .scores import (COMPLETION_FRACTIONS, beginning_stats, checked_fractions,
                      completion_statistics, controlled_rms, final_rms, final_views, online_rms)
 
@@ -316,8 +317,8 @@ def choose_by_patterns(data, candidates, params) -> dict:
     summary of the choice: the curve, the chosen K, whether it is a clear optimum, each K's
     stability and the pattern space's size."""
     space = PatternSpace(n_basis_of(params), data.n_observed,
-                         translation=params.get('translation', ())).fit(data.W)
-    X = space.transform(data.W)
+                         translation=params.get('translation', ()))
+    X = space.fit_transform(data.W)
     held = heldout_curve(X, candidates)
     stability = {}
     # Which K the held-out likelihood supports: those within two paired standard errors of
@@ -350,7 +351,7 @@ def choose_by_patterns(data, candidates, params) -> dict:
     return {'criterion': 'patterns', **summary,
             'unit': 'nats per demonstration, leave-one-out, in the pattern space',
             'stability': stability,
-            'pattern_dims': int(len(space.components_)),
+            'pattern_dims': int(X.shape[1]),
             'smoothing': data.smoothing.tolist(),
             'explained_variance': float(space.explained_variance_ratio_.sum())}
 
