@@ -113,8 +113,9 @@ def plain_ecm(batched):
     """PatternMixture._ecm run on one start at a time (the straightforward loop)."""
     import numpy as np
 
-    def ecm(self, X, R, floors):
-        runs = [batched(self, X[b:b + 1], R[b:b + 1], floors[b:b + 1]) for b in range(len(X))]
+    def ecm(self, X, R, floors, fixed=None):
+        runs = [batched(self, X[b:b + 1], R[b:b + 1], floors[b:b + 1], fixed)
+                for b in range(len(X))]
         return tuple(np.concatenate(parts) for parts in zip(*runs))
     return ecm
 
