@@ -223,11 +223,12 @@ class NodeSet:
     def kill(self, name: str) -> float:
         """SIGKILL ``name``'s process; the simulated time of the latest joint state then."""
         proc = self.proc(name)
-        self.kill_ns = time.time_ns()
         proc.send_signal(signal.SIGKILL)
         self.killed.add(self.keys[name])
         t = self.probe.now
         proc.wait()
+        # once reaped it writes nothing: a plan written after this was written by another
+        self.kill_ns = time.time_ns()
         return t
 
     def restart(self, name: str) -> None:

@@ -71,6 +71,8 @@ def _lines(p, since: int, node: str, limit: int = 6) -> list:
 
 
 def _plans_after(p, since: int, kill_ns: int) -> dict:
+    if any(c['sent_ns'] <= 0 for c in p.plans):
+        raise FaultRunError('the middleware gave plans no source timestamp')
     after = [c for c in p.plans[since:] if not c['stray'] and c['sent_ns'] > kill_ns]
     return {'plans_after_kill': sum(not c['empty'] for c in after),
             'holds_after_kill': sum(c['empty'] for c in after)}

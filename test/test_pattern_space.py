@@ -135,5 +135,7 @@ def test_each_agent_weighs_the_same_and_bad_settings_are_refused():
         PatternSpace(N, 2, variance=0).fit_transform(W)
     with pytest.raises(ValueError, match='n_observed'):
         PatternSpace(N, 6).fit_transform(W)
+    with pytest.raises(ValueError, match='finite'):
+        PatternSpace(N, 2).fit_transform(np.where(np.eye(20, 5 * N) > 0, np.nan, W))
     with pytest.raises(ValueError, match='at least 2'):
         PatternSpace(N, 2).fit_transform(W[:1])

@@ -1,5 +1,6 @@
-"""Pattern discovery (core.patterns): the mixture's EM against scikit-learn's, the leave-one-out curve against the straightforward loop, and the
-patterns found where weights hide them."""
+"""Pattern discovery (core.patterns): the mixture's EM against scikit-learn's, the
+leave-one-out curve against the straightforward loop, and the patterns found where weights
+hide them."""
 
 import numpy as np
 import pytest

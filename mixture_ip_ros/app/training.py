@@ -3,8 +3,9 @@ layout: the observed agent with >= 1 DOF, the controlled agent with >= 0.
 
 K, unless given, is chosen from candidates by one of two criteria, each a curve over K:
 - 'patterns' (the default, ``'auto'``): the leave-one-out log-likelihood of held-out
-  demonstrations in the pattern space, where the patterns are found (core.patterns: the
-  paths of both agents, a few principal components, a t mixture with shrunk scales), each
+  demonstrations in the pattern space, where the patterns are found (core.pattern_space: the
+  paths of both agents compared time-warped, a few coordinates; core.patterns: a t mixture
+  with shrunk scales), each
   held-out demonstration allowed to be none of the patterns with probability 1/n; among the
   candidates within two paired standard errors of the best, those whose partitions are about
   as reproducible across subsamples as the most reproducible one's (cluster stability, median

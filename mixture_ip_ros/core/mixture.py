@@ -274,8 +274,8 @@ class MixtureIProMP(PhaseKnownInference):
                         demos[0].n_observed_dofs, acov, periods, smoothing)
 
     def initial_clusters(self, data: Prepared):
-        """EM's start (eq. 7's r_ik): the demonstrations' patterns, found in the metric of their
-        paths (core.patterns: a mixture in a few principal components of the path
+        """EM's start (eq. 7's r_ik): the demonstrations' patterns, found from their
+        time-warped paths (core.pattern_space: a t mixture of core.patterns in a few
         coordinates), each demonstration in its most probable one."""
         return np.argmax(self._pattern_mixture(self._pattern_coordinates(data)).resp_, axis=1)
 

@@ -55,8 +55,8 @@ def warped_distances(paths) -> np.ndarray:
     implementation, unconstrained window."""
     from dtaidistance import dtw_ndim
     series = [np.ascontiguousarray(p, dtype=np.double) for p in paths]
-    d = np.asarray(dtw_ndim.distance_matrix_fast(series, parallel=False), dtype=float)
-    d = np.minimum(d, d.T)          # the library fills one triangle
+    d = np.asarray(dtw_ndim.distance_matrix_fast(series, parallel=False, only_triu=False),
+                   dtype=float)
     np.fill_diagonal(d, 0.0)
     return d / np.sqrt(paths.shape[1])
 
@@ -65,9 +65,10 @@ def embedded(distances, variance: float = VARIANCE_KEPT, min_components: int = 1
     """(coordinates (n, q), the share of the spread each holds (q,)): classical multidimensional
     scaling of ``distances`` (n, n), the leading q components that hold ``variance`` of the
     spread (at least ``min_components``, at most n - 1 and the positive eigenvalues). A warped
-    distance need not be Euclidean; the negative eigenvalues it leaves are dropped. Each
-    coordinate's sign is fixed (its largest entry positive), so the same distances give the
-    same coordinates on any LAPACK."""
+    distance need not be Euclidean; the negative eigenvalues it leaves are dropped, and the
+    spread is that of the positive ones. Each coordinate's sign is fixed (its largest entry
+    positive), so that a LAPACK's choice of sign does not move them (a repeated eigenvalue
+    leaves its coordinates a rotation to choose, which the mixture does not see)."""
     d2 = np.asarray(distances, dtype=float) ** 2
     n = len(d2)
     centred = d2 - d2.mean(axis=0) - d2.mean(axis=1)[:, None] + d2.mean()
@@ -107,6 +108,8 @@ class PatternSpace:
 
     def fit_transform(self, W) -> np.ndarray:
         """(n, q) coordinates of the demonstrations with weights W (n, D N)."""
+        if not np.all(np.isfinite(W)):
+            raise ValueError('the weights of every demonstration must be finite')
         if not 0 < self.variance <= 1:
             raise ValueError(f'variance must be in (0, 1], got {self.variance!r}')
         paths = sampled_paths(without_offsets(W, self.n_basis, self.translation), self.n_basis)

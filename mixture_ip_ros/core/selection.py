@@ -311,7 +311,7 @@ def _offset_progress(progress, offset, total):
 
 
 def choose_by_patterns(data, candidates, params) -> dict:
-    """K by the held-out likelihood in the pattern space (core.patterns), and among the K it
+    """K by the held-out likelihood in the pattern space (core.pattern_space), and among the K it
     cannot tell apart, by how reproducible their partitions are (``data``: prepare_for_cv of
     the demonstrations with MixtureIProMP configuration ``params``). Returns training's
     summary of the choice: the curve, the chosen K, whether it is a clear optimum, each K's
