@@ -323,7 +323,9 @@ def test_four_recordings_of_each_pattern_are_enough_to_keep_patterns_apart(monke
     unseen = [patterns_in_space(X, range(1, 7), observed=X[:, :1])['chosen'] for X in draws]
     monkeypatch.setattr(selection, 'EVIDENCE_NATS', np.inf)
     parsimony = [patterns_in_space(X, range(1, 7))['chosen'] for X in draws]
-    # measured: 4 in 5 of 8 draws (one 5), against 3 of 8 by parsimony (the others 2)
-    assert parsimony.count(2) >= 4 and chosen.count(4) >= parsimony.count(4) + 2, (
+    # measured: 4 in 5 of 8 draws (one 5, two 2), by parsimony 4 in 3 (the others 2)
+    assert parsimony.count(2) >= 4, parsimony
+    assert all(c >= p for c, p in zip(chosen, parsimony)), (chosen, parsimony)
+    assert chosen.count(4) > parsimony.count(4) and chosen.count(2) < parsimony.count(2), (
         chosen, parsimony)
     assert unseen == parsimony, (unseen, parsimony)

@@ -327,8 +327,9 @@ def choose_by_patterns(data, candidates, params) -> dict:
     X = space.fit_transform(data.W)
     observed = None
     if data.W.shape[1] > P * N:
-        # the observed agent alone, each of its DOFs in a translation group on its own
-        mine = tuple((j,) for g in (groups or ()) for j in g if j < P)
+        # The observed agent alone, as the robot sees it online: of each translation group,
+        # its observed DOFs shift together.
+        mine = tuple(h for h in (tuple(j for j in g if j < P) for g in groups or ()) if h)
         observed = PatternSpace(N, P, translation=mine).fit_transform(data.W[:, :P * N])
     return {'criterion': 'patterns', **patterns_in_space(X, candidates, observed),
             'unit': 'nats per demonstration, leave-one-out, in the pattern space',
@@ -356,17 +357,18 @@ def patterns_in_space(X, candidates, observed=None) -> dict:
     # whose median agreement reaches the lower quartile of the most reproducible K's (as
     # reproducible as a quarter of its own pairs); of those, the smallest within one paired
     # standard error of their best held-out likelihood (in a space of one or two dimensions a
-    # split of one pattern can be reproducible too, and gains nothing held out) unless a
-    # larger K overrules it: at least as reproducible, and better held out by EVIDENCE_NATS
-    # both in this space and in the observed agent's alone. One standard error alone is a
+    # split of one pattern can be reproducible too, and gains nothing held out) that no larger
+    # K overrules: at least as reproducible, and better held out by EVIDENCE_NATS both in
+    # this space and in the observed agent's alone. One standard error alone is a
     # parsimony that grows as the demonstrations get fewer: with four or five of each pattern
     # it is as large as the gain of every true split (NuiSI v2 with half the recordings: four
     # interactions found exactly and reproduced in 9 of 10 folds, K 2 or 3 chosen in 5). The
     # evidence of a split grows with every demonstration the split explains, and a split in
     # the controlled agent's paths alone, which the robot cannot tell online from the
     # observed agent, thins every component's data for nothing (the pole's two sides split in
-    # four: 3.8 nats better held out, 2.7 in the observed agent's paths, where the sides are
-    # not found at all; the flange error on one-sided spots 3.2 -> 5.3 cm).
+    # four: 3.8 nats better held out; in the observed agent's paths, where the sides are not
+    # found at all, four components gain 2.7 over two; the flange error on one-sided spots
+    # 3.2 -> 5.3 cm).
     def most_reproducible(plateau):
         fits = [i for i in plateau if candidates[i] <= round(0.8 * len(X))]
         if len(fits) < 2:
@@ -395,7 +397,7 @@ def patterns_in_space(X, candidates, observed=None) -> dict:
                        and reproduced[b] >= reproduced[j] - rtol
                        and seen_total(b) - seen_total(j) > EVIDENCE_NATS + tol
                        for b in range(j + 1, len(ok)))
-        # the best is never overruled: nothing larger is better held out
+        # The default is never taken: the best is in near, and nothing larger is better.
         return ok[int(next((j for j in near if not overruled(j)), first_best(g.mean(axis=1))))]
     curve = selection_curve(held.robust, higher_is_better=True, paired=True,
                             choose=most_reproducible)
