@@ -300,13 +300,12 @@ def test_k_means_runs_side_by_side_are_each_seed_s_own_run():
 
 
 def _pairs_of_patterns(seed, n_each=4):
-    """Four patterns in two pairs, ``n_each`` demonstrations each: within a pair the patterns
-    are six standard deviations apart along the second coordinate, the pairs twenty along the
-    first. Returns (X, the pattern of each row)."""
+    """(n, 2) points of four patterns in two pairs, ``n_each`` demonstrations each: within a
+    pair the patterns are six standard deviations apart along the second coordinate, the pairs
+    twenty along the first."""
     rng = np.random.default_rng(seed)
     centres = np.array([[0, 0], [0, 3], [10, 0], [10, 3]], dtype=float)
-    X = np.vstack([c + rng.normal(0, 0.5, (n_each, 2)) for c in centres])
-    return X, np.repeat(np.arange(4), n_each)
+    return np.vstack([c + rng.normal(0, 0.5, (n_each, 2)) for c in centres])
 
 
 @pytest.mark.decision
@@ -318,7 +317,7 @@ def test_four_recordings_of_each_pattern_are_enough_to_keep_patterns_apart(monke
     tell the pairs apart only) is not: the robot could not tell its parts apart online."""
     from mixture_ip_ros.core import selection
     from mixture_ip_ros.core.selection import patterns_in_space
-    draws = [_pairs_of_patterns(seed)[0] for seed in range(8)]
+    draws = [_pairs_of_patterns(seed) for seed in range(8)]
     chosen = [patterns_in_space(X, range(1, 7))['chosen'] for X in draws]
     unseen = [patterns_in_space(X, range(1, 7), observed=X[:, :1])['chosen'] for X in draws]
     monkeypatch.setattr(selection, 'EVIDENCE_NATS', np.inf)
