@@ -129,7 +129,10 @@ def build_parser():
 
 def main(argv=None):
     set_process_defaults()       # before the commands import numpy and numba
-    logging.basicConfig(level=logging.INFO, format='%(levelname)s %(name)s: %(message)s')
+    # The package's own progress at INFO; other libraries' only when something is wrong
+    # (dtaidistance announces every distance matrix at INFO).
+    logging.basicConfig(level=logging.WARNING, format='%(levelname)s %(name)s: %(message)s')
+    logging.getLogger('mixture_ip_ros').setLevel(logging.INFO)
     args = build_parser().parse_args(argv)
     try:
         if hasattr(args, 'check'):
