@@ -1,6 +1,6 @@
 """Real human motion: PickupGestureWiimoteZ (fetched from the aeon wheel) through the gesture
-evaluation, on a CI-sized subset (4 of the 10 people), with its baselines; the .ts reader on its
-own."""
+evaluation, on a CI-sized subset (4 of the 10 people), with its baselines; the evaluation's
+K = 10 reference on all ten people; the .ts reader on its own."""
 
 import json
 
