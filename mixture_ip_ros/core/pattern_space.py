@@ -67,9 +67,10 @@ def warped_distances(paths, band: float = BAND) -> np.ndarray:
     """(n, n) dynamic time warping distances between paths (n, n_points, D): the least root
     mean squared distance over monotone alignments of the two from shared start to shared end
     that pair no two points more than ``band`` of the path apart (a Sakoe-Chiba band: a
-    largest shift of floor(band (n_points - 1)) steps; 1: unconstrained), the sum of squared differences along
-    the alignment divided by ``n_points`` (so that it is the root mean squared distance at
-    equal phases where no warp is needed). dtaidistance's C implementation."""
+    largest shift of floor(band (n_points - 1)) steps; 1: unconstrained), the sum of squared
+    differences along the alignment divided by ``n_points`` (so that it is the root mean
+    squared distance at equal phases where no warp is needed). dtaidistance's C
+    implementation."""
     from dtaidistance import dtw_ndim
     if not 0 <= band <= 1:
         raise ValueError(f'band must be in [0, 1], got {band!r}')
