@@ -64,12 +64,13 @@ def count_calls(owner, name, counter):
 def plain_heldout(demos, candidates, fractions=(), prior_scales=(), n_folds=5, progress=None,
                   fold_seed=0, n_jobs=None, prepared=None, **params):
     """calibrated_heldout_curves (the held-out log-likelihood and, with a controlled agent, the
-    controlled agent's RMS) by the straightforward loop (one fit per fold and floor, from the
-    fold's demonstrations, one after another: ``n_jobs`` and ``prepared`` are not used)."""
+    controlled agent's online RMS and the patterns named online) by the straightforward loop
+    (one fit per fold and floor, from the fold's demonstrations, one after another: ``n_jobs``
+    and ``prepared`` are not used)."""
     import numpy as np
     from mixture_ip_ros.core.mixture import MixtureIProMP
     from mixture_ip_ros.core.crossval import cv_folds, prepare_for_cv
-    from mixture_ip_ros.core.scores import online_rms
+    from mixture_ip_ros.core.scores import online_scores
     fold = cv_folds(len(demos), n_folds, fold_seed)
     scales = [float(s) for s in prior_scales]
     params = {k: v for k, v in params.items() if k != 'prior_scale'}
@@ -77,28 +78,41 @@ def plain_heldout(demos, candidates, fractions=(), prior_scales=(), n_folds=5, p
     # of the fast path share it): each fold's fit from scratch is given it.
     params.setdefault('smoothing', prepare_for_cv(demos, params).smoothing)
     shape = (len(scales), len(candidates), len(demos))
-    S = {'loglik': np.empty(shape), 'controlled_rms': np.empty(shape)}
+    S = {'loglik': np.empty(shape), 'controlled_rms': np.empty(shape), 'named': np.empty(shape)}
+    # each demonstration's pattern: the pattern mixture's of them all, for every K
+    every = prepare_for_cv(demos, params)
+    patterns = [MixtureIProMP(n_components=K, **params).initial_clusters(every)
+                for K in candidates]
     for b, scale in enumerate(scales):
         for a, K in enumerate(candidates):
+            pattern = patterns[a]
             for f in range(fold.max() + 1):
                 test = np.flatnonzero(fold == f)
                 model = MixtureIProMP(n_components=K, prior_scale=scale, **params).fit(
                     [d for d, g in zip(demos, fold) if g != f])
                 S['loglik'][b, a, test] = model.score_demonstrations([demos[i] for i in test])
-                S['controlled_rms'][b, a, test] = [online_rms(model, [demos[i]])[0]
-                                                   for i in test]
+                member, theirs = np.argmax(model.resp_, axis=1), pattern[fold != f]
+                names = [np.bincount(theirs[member == k]).argmax() if np.any(member == k)
+                         else None for k in range(K)]
+                for i in test:
+                    got = online_scores(model, [demos[i]], pattern[[i]], names)
+                    S['controlled_rms'][b, a, i], S['named'][b, a, i] = got.rms[0], got.named[0]
     out = {}
     for name, scores in S.items():
         mean = scores.mean(axis=2)
         if name == 'controlled_rms':
             # the best log-likelihood among the floors whose online RMS is within one paired
-            # standard error of the best floor's
+            # standard error of the best floor's and, of those, that name the patterns within
+            # two paired standard errors of the best of them
             best = []
             for a in range(len(candidates)):
-                rms = scores[:, a]
+                rms, named = scores[:, a], S['named'][:, a]
                 low = rms[np.argmin(rms.mean(axis=1))]
                 allowed = [b for b in range(len(scales)) if (rms[b] - low).mean()
                            <= (rms[b] - low).std(ddof=1) / np.sqrt(len(demos))]
+                top = named[max(allowed, key=lambda b: named[b].mean())]
+                allowed = [b for b in allowed if (top - named[b]).mean()
+                           <= 2 * (top - named[b]).std(ddof=1) / np.sqrt(len(demos)) + 1e-9]
                 best.append(max(allowed, key=lambda b: S['loglik'][b, a].mean()))
             best = np.array(best)
         else:

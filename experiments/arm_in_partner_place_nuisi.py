@@ -34,7 +34,7 @@ import numpy as np  # noqa: E402
 from mixture_ip_ros.core.demonstration import Demonstration, Layout  # noqa: E402
 from mixture_ip_ros.core.share import config_path  # noqa: E402
 from mixture_ip_ros.io.csv_files import load_csv_dataset, write_csv_demonstration  # noqa: E402
-from mixture_ip_ros.app.naming import majority_names  # noqa: E402
+from mixture_ip_ros.core.named import majority_names  # noqa: E402
 from mixture_ip_ros.io.model_file import load_model  # noqa: E402
 from mixture_ip_ros.robot import partner_place  # noqa: E402
 from mixture_ip_ros.scenarios import interactions, nuisi  # noqa: E402

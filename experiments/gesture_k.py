@@ -29,7 +29,7 @@ import numpy as np  # noqa: E402
 
 from mixture_ip_ros.app.evaluation.baselines import sklearn_gmm_accuracy  # noqa: E402
 from mixture_ip_ros.app.evaluation.common import (majority_labels,  # noqa: E402
-                                                  online_components)
+                                                  named_online)
 from mixture_ip_ros.app.evaluation.gestures import GESTURE_FRACTIONS  # noqa: E402
 from mixture_ip_ros.core.mixture import MixtureIProMP  # noqa: E402
 from mixture_ip_ros.core.crossval import cv_folds  # noqa: E402
@@ -82,8 +82,7 @@ def accuracy_by_k(train, test, floors):
     for K, floor in zip(CANDIDATES, floors):
         model = MixtureIProMP(K, prior_scale=floor, **PARAMS).fit(train)
         names = majority_labels(model, train)
-        picked = np.array([[names[k] for k in online_components(model, d, GESTURE_FRACTIONS)]
-                           for d in test])
+        picked = named_online(model, names, test, GESTURE_FRACTIONS)
         gmm, _ = sklearn_gmm_accuracy(model.demonstration_weights(train), y_train,
                                       model.demonstration_weights(test), y_test, K,
                                       seeds=range(10))

@@ -97,20 +97,42 @@ def test_batched_posterior_means_equal_weight_posterior():
         assert np.allclose(pi, want_mean, rtol=1e-9, atol=1e-12)
 
 
+def _named_online(model, demo, fractions, pattern, names):
+    """The share of ``fractions`` after whose beginning of ``demo`` the online estimator's MAP
+    component is one ``names`` gives ``pattern``."""
+    from mixture_ip_ros.core.online import OnlineEstimator
+    from mixture_ip_ros.core.playback import prefixes
+    est = OnlineEstimator(model)
+    return np.mean([names[est.map_hypothesis()[0]] == pattern
+                    for _ in prefixes(est, demo, np.multiply(fractions, demo.duration))])
+
+
+def _within_se(g, n_se):
+    """The rows of ``g`` (options, n; higher is better) whose mean paired difference to the
+    best row's is at most ``n_se`` standard errors of it."""
+    best = np.argmax(g.mean(axis=1))
+    d = g[best] - g
+    return d.mean(axis=1) <= n_se * d.std(axis=1, ddof=1) / np.sqrt(g.shape[1]) + 1e-9
+
+
 @pytest.mark.parametrize('n_ctrl', [0, 2])
 def test_completion_curves_equal_the_straightforward_loop(n_ctrl):
     """Every held-out curve from the same fits; with a controlled agent also the robot's
-    criterion (the controlled agent predicted online from the observed agent's beginning)."""
+    criteria (the controlled agent predicted and the pattern named online from the observed
+    agent's beginning)."""
     demos = mixture_demos(seed=5, n_obs=2, n_ctrl=n_ctrl, counts=(8, 9, 7))[0]
     candidates, scales = [1, 2, 3], [1.0, 0.01]
     cal = calibrated_heldout_curves(demos, candidates, (0.3, 0.6), scales, n_basis=8)
     assert set(cal) == {'loglik', 'completion', 'completion_rms'} | (
-        {'controlled_rms'} if n_ctrl else set())
+        {'controlled_rms', 'named'} if n_ctrl else set())
     fold = cv_folds(len(demos), 5, 0)
-    smoothing = prepare_for_cv(demos, {'n_basis': 8}).smoothing        # the set's, shared
-    density, rms, ctrl, ll = (np.empty((2, 3, len(demos))) for _ in range(4))
+    prepared = prepare_for_cv(demos, {'n_basis': 8})
+    smoothing = prepared.smoothing                                  # the set's, shared
+    density, rms, ctrl, ll, named = (np.empty((2, 3, len(demos))) for _ in range(5))
     for b, scale in enumerate(scales):
         for a, K in enumerate(candidates):
+            # each demonstration's pattern: the pattern mixture's of all of them
+            pattern = MixtureIProMP(K, n_basis=8).initial_clusters(prepared)
             for f in range(5):
                 model = MixtureIProMP(K, n_basis=8, prior_scale=scale, smoothing=smoothing).fit(
                     [d for d, g in zip(demos, fold) if g != f])
@@ -120,6 +142,12 @@ def test_completion_curves_equal_the_straightforward_loop(n_ctrl):
                 ll[b, a, test] = model.score_demonstrations([demos[i] for i in test])
                 if n_ctrl:
                     ctrl[b, a, test] = [online_rms(model, [demos[i]])[0] for i in test]
+                    # a component's pattern: its training members' most common one
+                    member, theirs = np.argmax(model.resp_, axis=1), pattern[fold != f]
+                    names = [np.bincount(theirs[member == k]).argmax()
+                             if np.any(member == k) else None for k in range(K)]
+                    named[b, a, test] = [_named_online(model, demos[i], COMPLETION_FRACTIONS,
+                                                       pattern[i], names) for i in test]
     best = np.argmax(density.mean(axis=2), axis=0)
     assert cal['completion']['prior_scale'] == [scales[i] for i in best]
     assert np.allclose(cal['completion']['scores'], density[best, range(3)], rtol=1e-10)
@@ -127,14 +155,15 @@ def test_completion_curves_equal_the_straightforward_loop(n_ctrl):
     best = np.argmin(rms.mean(axis=2), axis=0)                      # lower RMS is better
     assert cal['completion_rms']['prior_scale'] == [scales[i] for i in best]
     if n_ctrl:
-        # The robot's floor: the best held-out likelihood among the floors whose online RMS
-        # is not above the best floor's by more than one paired standard error.
         assert np.allclose(cal['controlled_rms']['mean_by_scale'], ctrl.mean(axis=2),
                            rtol=1e-10)
+        assert np.array_equal(cal['named']['mean_by_scale'], named.mean(axis=2))
+        # The robot's floor: among the floors whose online RMS is within one paired standard
+        # error of the best floor's, those that name the patterns online within two paired
+        # standard errors of the best of them; of these the best held-out likelihood.
         for a in range(3):
-            low = np.argmin(ctrl[:, a].mean(axis=1))
-            allowed = [b for b in range(2) if (ctrl[b, a] - ctrl[low, a]).mean()
-                       <= (ctrl[b, a] - ctrl[low, a]).std(ddof=1) / np.sqrt(len(demos))]
+            allowed = np.flatnonzero(_within_se(-ctrl[:, a], 1))
+            allowed = allowed[_within_se(named[allowed, a], 2)]
             b = max(allowed, key=lambda b: ll[b, a].mean())
             assert cal['controlled_rms']['prior_scale'][a] == scales[b]
             assert np.allclose(cal['controlled_rms']['scores'][a], ctrl[b, a], rtol=1e-10)

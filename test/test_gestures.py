@@ -106,14 +106,14 @@ def test_ten_components_started_from_the_patterns_name_the_ten_people_online():
     the pattern space's clusters, so how it treats when a person moves shows here. With the
     alignment unconstrained it forgave that and named 24-32 % of the held-out gestures online;
     within the band (core.pattern_space.BAND) 32-48 %, as at equal phases (36-44 %)."""
-    from mixture_ip_ros.app.evaluation.common import majority_labels, online_components
+    from mixture_ip_ros.app.evaluation.common import majority_labels, named_online
     from mixture_ip_ros.app.evaluation.gestures import GESTURE_FRACTIONS, gesture_config
     from mixture_ip_ros.scenarios.gestures import gesture_demonstrations
     config = gesture_config()
     train, test = gesture_demonstrations('train'), gesture_demonstrations('test')
     model = MixtureIProMP(n_components=10, random_state=0, **config.model).fit(train)
     names = majority_labels(model, train)
-    said = np.array([[names[k] for k in online_components(
-        model, d, GESTURE_FRACTIONS, config.n_alpha, config.min_interval)] for d in test])
+    said = named_online(model, names, test, GESTURE_FRACTIONS, config.n_alpha,
+                        config.min_interval)
     right = np.mean(said == np.array([d.label for d in test])[:, None], axis=0)
     assert right.mean() >= 0.35, right

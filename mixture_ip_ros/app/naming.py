@@ -6,18 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-
-def majority_names(assigned, labels, n_components) -> list:
-    """The majority label among the members of each of ``n_components`` clusters (``assigned``:
-    each item's cluster), None for a cluster with none. Ties go to the first label in
-    sorted order, so every run names the components alike."""
-    labels = np.asarray(labels, dtype=object)
-    assigned = np.asarray(assigned)
-    out = []
-    for k in range(n_components):
-        members = labels[assigned == k].tolist()
-        out.append(max(sorted(set(members), key=str), key=members.count) if members else None)
-    return out
+from mixture_ip_ros.core.named import majority_names
 
 
 def component_labels(model, demos):

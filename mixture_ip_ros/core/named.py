@@ -1,5 +1,6 @@
-"""Patterns where some demonstrations are named: the start of semi-supervised EM
-(core.mixture.MixtureIProMP.fit with labels for some demonstrations and None for the rest).
+"""Names and patterns: a cluster's majority name, and patterns where some demonstrations are
+named, the start of semi-supervised EM (core.mixture.MixtureIProMP.fit with labels for some
+demonstrations and None for the rest).
 
 Names fix which pattern a named demonstration belongs to; how far each pattern reaches is still
 found from all the demonstrations, in the pattern space where discovery finds it (core.patterns).
@@ -9,6 +10,19 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from .numerics import tie_tolerance
+
+
+def majority_names(assigned, labels, n_components) -> list:
+    """The majority label among the members of each of ``n_components`` clusters (``assigned``:
+    each item's cluster), None for a cluster with none. Ties go to the first label in
+    sorted order, so every run names the components alike."""
+    labels = np.asarray(labels, dtype=object)
+    assigned = np.asarray(assigned)
+    out = []
+    for k in range(n_components):
+        members = labels[assigned == k].tolist()
+        out.append(max(sorted(set(members), key=str), key=members.count) if members else None)
+    return out
 
 
 def matched_components(clusters, index, n_names: int, n_components: int) -> np.ndarray:

@@ -3,8 +3,8 @@ from, each score a held-out criterion of core.selection and the evaluations:
 
 - :func:`controlled_rms`, the thesis's error of the controlled agent given the observed one
   (Figs. 8 and 10), and its batched form for many demonstrations at once (:func:`final_rms`);
-- :func:`online_rms`, the controlled agent predicted online from the observed agent's
-  beginning, the phase unknown, as the estimator node predicts it;
+- :func:`online_scores`, the controlled agent predicted and the pattern named online from the
+  observed agent's beginning, the phase unknown, as the estimator node does;
 - :func:`score_completion`, the rest of a demonstration predicted from its beginning, the
   phase known (the single-agent criterion).
 """
@@ -113,23 +113,46 @@ def final_rms(model, view: FinalView, idx) -> np.ndarray:
     return out
 
 
-def online_rms(model, demos, fractions=None, n_alpha: int = 50,
-               min_interval: float = 0.05) -> np.ndarray:
-    """How well ``model`` predicts each of ``demos``' controlled agent online, as the estimator
-    node does: after the first f T of the observed agent (phase unknown) for each ``fraction``
-    f (default COMPLETION_FRACTIONS), the MAP component's expected path of the controlled agent
-    over the rest of the movement (core.playback.prefix_predictions); the RMS error over the
-    rest's samples and DOFs, averaged over the fractions. (len(demos),), NaN for a
-    demonstration with nothing left to predict at any fraction."""
+class OnlineScores(NamedTuple):
+    """:func:`online_scores` of each demonstration (n,): ``rms`` of the controlled agent, NaN
+    for one with nothing left to predict; ``named``, the share of its beginnings whose MAP
+    component names its pattern."""
+
+    rms: np.ndarray
+    named: np.ndarray
+
+
+def online_scores(model, demos, patterns=None, names=None, fractions=None,
+                  n_alpha: int = 50, min_interval: float = 0.05) -> OnlineScores:
+    """How well ``model`` does online what the estimator node does with each of ``demos``:
+    after the first f T of the observed agent (phase unknown) for each ``fraction`` f (default
+    COMPLETION_FRACTIONS), averaged over the fractions,
+
+    - ``rms``: the MAP component's expected path of the controlled agent over the rest of the
+      movement (core.playback.prefix_predictions) against the recorded one, the RMS over the
+      rest's samples and DOFs (NaN without a controlled agent or anything left to predict);
+    - ``named``: whether the MAP component is one that ``names`` (K,) gives the
+      demonstration's pattern ``patterns`` (n,), the decision the estimator takes (NaN without
+      ``patterns``)."""
     fractions = checked_fractions(COMPLETION_FRACTIONS if fractions is None else fractions)
     est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval)
-    out = np.full(len(demos), np.nan)
+    rms, named = np.full(len(demos), np.nan), np.full(len(demos), np.nan)
     for i, demo in enumerate(demos):
+        beginnings = prefix_predictions(est, demo, fractions)
         errors = [np.sqrt(np.mean((p.controlled - demo.controlled[p.rest]) ** 2))
-                  for p in prefix_predictions(est, demo, fractions) if p.controlled is not None]
-        if errors:
-            out[i] = np.mean(errors)
-    return out
+                  for p in beginnings if p.controlled is not None]
+        if errors and demo.n_controlled_dofs:
+            rms[i] = np.mean(errors)
+        if patterns is not None:
+            named[i] = np.mean([names[p.component] == patterns[i] for p in beginnings])
+    return OnlineScores(rms, named)
+
+
+def online_rms(model, demos, fractions=None, n_alpha: int = 50,
+               min_interval: float = 0.05) -> np.ndarray:
+    """:func:`online_scores`' RMS of the controlled agent predicted online, (len(demos),)."""
+    return online_scores(model, demos, fractions=fractions, n_alpha=n_alpha,
+                         min_interval=min_interval).rms
 
 
 def score_completion(model, demonstrations, fractions=None):

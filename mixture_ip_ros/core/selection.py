@@ -21,12 +21,14 @@ import numpy as np
 from .basis import GaussianBasis
 from .crossval import fold_scores, k_folds, leave_one_out, n_basis_of, prepare_for_cv
 from .mixture import MixtureIProMP
+from .named import majority_names
 from .numerics import first_best, tie_tolerance
 from .parallel import ProgressCount, map_threads
 from .pattern_space import PatternSpace
 from .patterns import heldout_curve, partition_stability
 from .scores import (COMPLETION_FRACTIONS, beginning_stats, checked_fractions,
-                     completion_statistics, controlled_rms, final_rms, final_views, online_rms)
+                     completion_statistics, controlled_rms, final_rms, final_views,
+                     online_scores)
 
 
 # Held-out evidence (nats summed over the demonstrations: the log of Geisser and Eddy's
@@ -80,9 +82,11 @@ def loo_rms_by_components(demonstrations, candidates, observe: str = 'final', pr
 
 class _FoldPart(NamedTuple):
     """What every fit of one fold shares: the demonstrations it learns from (``train``, a
-    Prepared), the held-out indices ``test``, their statistics and their beginnings'."""
+    Prepared, and their indices ``members``), the held-out indices ``test``, their statistics
+    and their beginnings'."""
 
     train: object
+    members: np.ndarray
     test: np.ndarray
     test_stats: object
     test_beginnings: object
@@ -96,8 +100,11 @@ def _heldout_scores(demonstrations, candidates, scales, n_folds, progress, fold_
     'completion' and 'completion_rms', core.scores.score_completion's two scores averaged over
     the fractions. What each demonstration contributes on its own is computed once, and each
     fold's k-means start of each K once for every scale (it does not depend on the floor).
-    With ``controlled`` and a controlled agent, also 'controlled_rms': core.scores.online_rms
-    of the held-out demonstration (NaN for one with nothing to predict).
+    With ``controlled`` and a controlled agent, also 'controlled_rms' and 'named':
+    core.scores.online_scores of the held-out demonstration (RMS NaN for one with nothing to
+    predict), its pattern the one the demonstrations' pattern mixture with K components gives
+    it (MixtureIProMP.initial_clusters of them all, which no floor changes), each component of
+    a fold's model named by the pattern most of its training demonstrations have.
     ``progress(done, total, K)`` after each fit. The fits run side by side on ``n_jobs``
     threads (core.crossval.fold_scores; None: every core), each filling its own entries.
     ``data``: core.crossval.prepare_for_cv of the demonstrations, if the caller has it."""
@@ -108,12 +115,15 @@ def _heldout_scores(demonstrations, candidates, scales, n_folds, progress, fold_
     out = {'loglik': np.empty(shape)}
     basis = GaussianBasis(n_basis_of(params))
     if controlled and demos[0].n_controlled_dofs:
-        out['controlled_rms'] = np.empty(shape)
+        out['controlled_rms'], out['named'] = np.empty(shape), np.empty(shape)
+        patterns = map_threads(lambda K: MixtureIProMP(n_components=K, **params)
+                               .initial_clusters(data) if K > 1 else np.zeros(len(demos), int),
+                               candidates, n_jobs)
     if fractions:
         out['completion'], out['completion_rms'] = np.empty(shape), np.empty(shape)
         beginnings = beginning_stats(basis, demos, checked_fractions(fractions))
     counter = ProgressCount(progress, len(scales) * len(candidates) * len(folds))
-    parts = [_FoldPart(data.take(fold.train), fold.test, data.take(fold.test).stats,
+    parts = [_FoldPart(data.take(fold.train), fold.train, fold.test, data.take(fold.test).stats,
                        [st.take(fold.test) for st in beginnings] if fractions else None)
              for fold in folds]
     keys = [(f, a) for f in range(len(parts)) for a in range(len(candidates))]
@@ -132,10 +142,14 @@ def _heldout_scores(demonstrations, candidates, scales, n_folds, progress, fold_
         return model.fit(parts[f].train, init=inits[f, a])
 
     def score(model, f, setting):
-        (a, b), (_, test, test_stats, test_beginnings) = setting, parts[f]
+        (a, b), (_, members, test, test_stats, test_beginnings) = setting, parts[f]
         out['loglik'][b, a, test] = model.score_statistics(test_stats, data.alphas[test])
         if 'controlled_rms' in out:
-            out['controlled_rms'][b, a, test] = online_rms(model, [demos[i] for i in test])
+            pattern = patterns[a]
+            names = majority_names(np.argmax(model.resp_, axis=1), pattern[members],
+                                   model.n_components)
+            out['controlled_rms'][b, a, test], out['named'][b, a, test] = online_scores(
+                model, [demos[i] for i in test], pattern[test], names)
         if fractions:
             density, rms = completion_statistics(model, test_stats, test_beginnings,
                                                  data.alphas[test])
@@ -166,18 +180,26 @@ def calibrated_heldout_curves(demonstrations, candidates, fractions=COMPLETION_F
     - 'loglik': log p(D_i, alpha_i) of the held-out demonstration (higher is better);
     - with ``controlled`` (default) and a controlled agent, 'controlled_rms': the controlled
       agent predicted online from the observed agent's beginning, the phase unknown, as the
-      estimator node predicts it (:func:`core.scores.online_rms`) on the held-out folds,
-      lower is better.
-      Its floor is the one with the best held-out likelihood among the floors whose RMS is
-      within one paired standard error of the lowest (the one-standard-error rule of RMS
-      curves, as :func:`selection_curve` reads the thesis's): what the robot is for decides,
-      and among the floors it cannot tell apart the one that describes the demonstrations
-      best. Two standard errors would let the likelihood pull the floor up to where the
-      prediction is visibly worse. The likelihood alone scores whole demonstrations with
-      their phase known and prefers floors that blur the patterns for a beginning whose phase
-      is not, where online recognition and the partner's prediction are worse
-      (experiments/floor_online.py). The RMS alone barely moves below some floor, so its
-      minimum there is noise at the grid's edge, which the likelihood settles.
+      estimator node predicts it (:func:`core.scores.online_scores`) on the held-out folds,
+      lower is better; and 'named', how often the estimator's MAP component from those
+      beginnings names the held-out demonstration's pattern (higher is better).
+      The floor of 'controlled_rms' is the one with the best held-out likelihood among the
+      floors whose RMS is within one paired standard error of the lowest (the
+      one-standard-error rule of RMS curves, as :func:`selection_curve` reads the thesis's)
+      and that name the patterns not significantly worse than the best of them (two paired
+      standard errors: the naming only keeps out a floor that is clearly worse at it): what
+      the robot is for decides, the partner it predicts and the pattern it names, and among
+      the floors it cannot tell apart the one that describes the demonstrations best. Two
+      standard errors would let the likelihood pull the floor up to where the prediction is
+      visibly worse. The likelihood alone scores whole demonstrations with their phase known
+      and prefers floors that blur the patterns for a beginning whose phase is not, where
+      online recognition and the partner's prediction are worse
+      (experiments/floor_online.py); with few demonstrations the RMS is too uncertain to
+      stop it (four or five of each NuiSI v2 interaction, the pace changed: the RMS allows
+      0.316, where the inner folds' beginnings name their pattern a quarter of the time, 90 %
+      at 0.0316), so the naming gates it too. The RMS alone
+      barely moves below some floor, so its minimum there is noise at the grid's edge, which
+      the likelihood settles.
     - with ``fractions``, the single-agent analogue of the thesis's leave-one-out of the
       controlled agent, what a model of one agent's movements is used for (recognise a
       movement and predict its rest from its beginning): 'completion', the predictive log
@@ -208,6 +230,8 @@ def calibrated_heldout_curves(demonstrations, candidates, fractions=COMPLETION_F
                 scored = ~np.isnan(S[:, a]).any(axis=0)
                 allowed = (not_significantly_worse(-S[:, a][:, scored], n_se=1.0)
                            if scored.any() else np.ones(len(scales), dtype=bool))
+                kept = np.flatnonzero(allowed)
+                allowed[kept] = not_significantly_worse(scores['named'][kept, a])
                 ll = scores['loglik'][:, a].mean(axis=1)
                 best[a] = first_best(np.where(allowed, ll, -np.inf))
         else:
@@ -438,8 +462,9 @@ def choose_by_loo(demos, candidates, n_folds, progress, prior_scales, params, n_
 def calibrated_floor(demos, K, n_folds, progress, prior_scales, params, n_jobs=None,
                      prepared=None) -> float:
     """The covariance floor of a K-component model, calibrated on held-out folds: the one with
-    the best held-out likelihood or, where there is a controlled agent, the one that predicts
-    it best among those not significantly worse (:func:`calibrated_heldout_curves`)."""
+    the best held-out likelihood; where there is a controlled agent, among the floors that
+    predict it and name the patterns online not significantly worse than the best
+    (:func:`calibrated_heldout_curves`)."""
     curves = calibrated_heldout_curves(demos, [K], (), list(prior_scales), n_folds,
                                        _offset_progress(progress, 0, None), n_jobs=n_jobs,
                                        prepared=prepared, **params)

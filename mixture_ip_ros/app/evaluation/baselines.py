@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from mixture_ip_ros.app.evaluation.common import prefix_length
-from mixture_ip_ros.app.naming import majority_names
+from mixture_ip_ros.core.named import majority_names
 from mixture_ip_ros.core.basis import GaussianBasis
 from mixture_ip_ros.core.crossval import cv_folds
 from mixture_ip_ros.core.phase import log_evidence_batch

@@ -15,8 +15,8 @@ import numpy as np
 
 from mixture_ip_ros.app.evaluation.baselines import (PerClassProMP, dtw_1nn_accuracy,
                                                      sklearn_gmm_accuracy)
-from mixture_ip_ros.app.evaluation.common import (EvalConfig, majority_labels,
-                                                  online_component_given_end, online_components,
+from mixture_ip_ros.app.evaluation.common import (EvalConfig, majority_labels, named_online,
+                                                  online_component_given_end,
                                                   phase_known_components, trained)
 from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.warped import PhaseWarps
@@ -72,9 +72,8 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
         P = np.asarray(pred_rows)
         return {k: float(np.mean(P[:, c] == truth)) for c, k in enumerate(keys)}
     t0 = time.perf_counter()
-    unsup = accuracy([[names[k] for k in online_components(model, d, fractions, config.n_alpha,
-                                                           config.min_interval)] for d in test],
-                     y_test)
+    unsup = accuracy(named_online(model, names, test, fractions, config.n_alpha,
+                                  config.min_interval), y_test)
     unsup_known = accuracy([[names[k] for k in phase_known_components(
         model, d, fractions, config.min_interval)] for d in test], y_test)
 
@@ -90,9 +89,8 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
         train, labels=y_train)
     sup_model.warps_ = PhaseWarps().fit(sup_model, train)
     cls = sup_model.classes_
-    sup = accuracy([[cls[k] for k in online_components(sup_model, d, fractions, config.n_alpha,
-                                                       config.min_interval)] for d in test],
-                   y_test)
+    sup = accuracy(named_online(sup_model, cls, test, fractions, config.n_alpha,
+                                config.min_interval), y_test)
     sup_known = accuracy([[cls[k] for k in phase_known_components(
         sup_model, d, fractions, config.min_interval)] for d in test], y_test)
     sup_end = accuracy_given_end(sup_model, cls)
@@ -120,8 +118,8 @@ def evaluate_gestures(train, test, out_dir: Path, config: EvalConfig = None,
     ref = MixtureIProMP(n_components=Kc, random_state=seed, **params).fit(train)
     ref.warps_ = PhaseWarps().fit(ref, train)
     ref_names = majority_labels(ref, train)
-    ref_acc = accuracy([[ref_names[k] for k in online_components(
-        ref, d, fractions, config.n_alpha, config.min_interval)] for d in test], y_test)
+    ref_acc = accuracy(named_online(ref, ref_names, test, fractions, config.n_alpha,
+                                    config.min_interval), y_test)
     ref_end = accuracy_given_end(ref, ref_names)
     ref_gmm, _ = sklearn_gmm_accuracy(W_train, y_train, W_test, y_test, Kc,
                                       seeds=range(seed, seed + 10))

@@ -15,7 +15,7 @@ import numpy as np
 from sklearn.metrics import adjusted_rand_score
 
 from mixture_ip_ros.app.evaluation.interactions import FRACTIONS, path_errors
-from mixture_ip_ros.app.naming import majority_names
+from mixture_ip_ros.core.named import majority_names
 from mixture_ip_ros.core.demonstration import Layout
 from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.core.playback import observed_rows, prefix_predictions
