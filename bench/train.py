@@ -66,7 +66,8 @@ def plain_heldout(demos, candidates, fractions=(), prior_scales=(), n_folds=5, p
     """calibrated_heldout_curves (the held-out log-likelihood and, with a controlled agent, the
     controlled agent's online RMS and the patterns named online) by the straightforward loop
     (one fit per fold and floor, from the fold's demonstrations, one after another: ``n_jobs``
-    and ``prepared`` are not used)."""
+    and ``prepared`` are not used). The online scores are core.scores.online_scores' (the
+    oracle of test_completion checks them against the estimator fed sample by sample)."""
     import numpy as np
     from mixture_ip_ros.core.mixture import MixtureIProMP
     from mixture_ip_ros.core.crossval import cv_folds, prepare_for_cv

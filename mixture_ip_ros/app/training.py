@@ -12,9 +12,9 @@ K, unless given, is chosen from candidates by one of two criteria, each a curve 
   agreement), and of those the smallest within one paired standard error of their best
   (core.selection.choose_by_patterns);
 - 'loo': the thesis's leave-one-out RMS of the controlled agent given the final observed
-  position (Figs. 8/10), where there is a controlled agent, each K at the floor that predicts
-  the controlled agent best on cross-validated fits among the floors whose held-out likelihood
-  is not significantly worse (core.selection.choose_by_loo).
+  position (Figs. 8/10), where there is a controlled agent, each K at the robot's floor: the
+  best held-out likelihood among the floors that predict the controlled agent and name the
+  patterns online not significantly worse than the best (core.selection.choose_by_loo).
 The chosen K's curve, the choice, its covariance floor and whether the curve has a clear
 optimum go into the training summary. The model is fitted with the chosen K at the floor
 calibrated for it on held-out folds (the robot's floor where there is a controlled agent;

@@ -6,6 +6,8 @@ Names fix which pattern a named demonstration belongs to; how far each pattern r
 found from all the demonstrations, in the pattern space where discovery finds it (core.patterns).
 """
 
+import numbers
+
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
@@ -15,13 +17,17 @@ from .numerics import tie_tolerance
 def majority_names(assigned, labels, n_components) -> list:
     """The majority label among the members of each of ``n_components`` clusters (``assigned``:
     each item's cluster), None for a cluster with none. Ties go to the first label in
-    sorted order, so every run names the components alike."""
+    sorted order (numbers by value, names by their text), so every run names the components
+    alike."""
     labels = np.asarray(labels, dtype=object)
     assigned = np.asarray(assigned)
+
+    def order(label):
+        return (0, label, '') if isinstance(label, numbers.Real) else (1, 0, str(label))
     out = []
     for k in range(n_components):
         members = labels[assigned == k].tolist()
-        out.append(max(sorted(set(members), key=str), key=members.count) if members else None)
+        out.append(max(sorted(set(members), key=order), key=members.count) if members else None)
     return out
 
 

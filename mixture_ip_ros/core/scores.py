@@ -135,13 +135,15 @@ def online_scores(model, demos, patterns=None, names=None, fractions=None,
       demonstration's pattern ``patterns`` (n,), the decision the estimator takes (NaN without
       ``patterns``)."""
     fractions = checked_fractions(COMPLETION_FRACTIONS if fractions is None else fractions)
+    if (patterns is None) != (names is None):
+        raise ValueError('online_scores names patterns with both patterns and names, or neither')
     est = OnlineEstimator(model, n_alpha=n_alpha, min_interval=min_interval)
     rms, named = np.full(len(demos), np.nan), np.full(len(demos), np.nan)
     for i, demo in enumerate(demos):
         beginnings = prefix_predictions(est, demo, fractions)
         errors = [np.sqrt(np.mean((p.controlled - demo.controlled[p.rest]) ** 2))
                   for p in beginnings if p.controlled is not None]
-        if errors and demo.n_controlled_dofs:
+        if errors:
             rms[i] = np.mean(errors)
         if patterns is not None:
             named[i] = np.mean([names[p.component] == patterns[i] for p in beginnings])

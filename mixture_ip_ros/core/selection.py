@@ -5,8 +5,9 @@ public methods, and the choices training makes with them.
 - the thesis's leave-one-out RMS of the controlled agent (Figs. 8 and 10),
   :func:`loo_rms_by_components`, given the final observed position or the whole path;
 - the held-out log-likelihood of whole demonstrations, the completion of a held-out
-  demonstration from its beginning and the controlled agent's held-out online RMS, each K at the
-  covariance floor the criterion prefers (:func:`calibrated_heldout_curves`);
+  demonstration from its beginning, the controlled agent's held-out online RMS and the patterns
+  named online, each K at the covariance floor the criterion prefers
+  (:func:`calibrated_heldout_curves`);
 - the plateau rule that reads a curve (:func:`selection_curve`);
 - training's choices: K by the pattern space (:func:`choose_by_patterns`) or by the thesis's
   leave-one-out (:func:`choose_by_loo`), and the floor of a given K (:func:`calibrated_floor`).
@@ -212,7 +213,8 @@ def calibrated_heldout_curves(demonstrations, candidates, fractions=COMPLETION_F
     ``params``, where the caller has it (training shares it between its stages).
     Returns {criterion: {'scores' (len(candidates), n): each K's per-demonstration score at
     its floor, 'prior_scale': the floor per candidate, 'prior_scales' and 'mean_by_scale'
-    (len(prior_scales), len(candidates)): the mean of every curve tried}}.
+    (len(prior_scales), len(candidates)): the mean of every curve tried}}; 'named' is a gate
+    of 'controlled_rms', not a criterion for K (its floor is the one that names best).
     """
     demos = list(demonstrations)
     scales = [float(s) for s in prior_scales]
@@ -231,9 +233,8 @@ def calibrated_heldout_curves(demonstrations, candidates, fractions=COMPLETION_F
                 allowed = (not_significantly_worse(-S[:, a][:, scored], n_se=1.0)
                            if scored.any() else np.ones(len(scales), dtype=bool))
                 kept = np.flatnonzero(allowed)
-                allowed[kept] = not_significantly_worse(scores['named'][kept, a])
-                ll = scores['loglik'][:, a].mean(axis=1)
-                best[a] = first_best(np.where(allowed, ll, -np.inf))
+                kept = kept[not_significantly_worse(scores['named'][kept, a])]
+                best[a] = kept[first_best(scores['loglik'][kept, a].mean(axis=1))]
         else:
             # A tie takes the first floor: PRIOR_SCALES run from the largest, the simplest.
             mean = S.mean(axis=2)

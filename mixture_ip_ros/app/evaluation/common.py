@@ -163,12 +163,14 @@ def online_components(model, demo, fractions, n_alpha=50, min_interval=0.05, **s
             for _ in prefixes(est, demo, np.multiply(fractions, demo.duration))]
 
 
-def named_online(model, names, demos, fractions, n_alpha=50, min_interval=0.05) -> np.ndarray:
+def named_online(model, names, demos, fractions, n_alpha=50, min_interval=0.05,
+                 **settings) -> np.ndarray:
     """The name (``names`` (K,)) of the component :func:`online_components` finds most probable
-    after each of ``fractions`` of each of ``demos``: (len(demos), len(fractions))."""
+    after each of ``fractions`` of each of ``demos`` (``settings`` as there): (len(demos),
+    len(fractions))."""
     return np.array([[names[k] for k in online_components(model, d, fractions, n_alpha,
-                                                          min_interval)] for d in demos],
-                    dtype=object)
+                                                          min_interval, **settings)]
+                     for d in demos], dtype=object)
 
 
 def online_component_given_end(model, demo, n_alpha=50, min_interval=0.05):
