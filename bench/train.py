@@ -77,11 +77,11 @@ def plain_heldout(demos, candidates, fractions=(), prior_scales=(), n_folds=5, p
     params = {k: v for k, v in params.items() if k != 'prior_scale'}
     # The weights' smoothing is the set's (chosen once on every demonstration, as the folds
     # of the fast path share it): each fold's fit from scratch is given it.
-    params.setdefault('smoothing', prepare_for_cv(demos, params).smoothing)
+    every = prepare_for_cv(demos, params)
+    params.setdefault('smoothing', every.smoothing)
     shape = (len(scales), len(candidates), len(demos))
     S = {'loglik': np.empty(shape), 'controlled_rms': np.empty(shape), 'named': np.empty(shape)}
     # each demonstration's pattern: the pattern mixture's of them all, for every K
-    every = prepare_for_cv(demos, params)
     patterns = [MixtureIProMP(n_components=K, **params).initial_clusters(every)
                 for K in candidates]
     for b, scale in enumerate(scales):
