@@ -179,9 +179,12 @@ def test_past_the_novelty_test_the_arm_follows_the_change(setup, shipped, withou
 def test_with_the_novelty_test_a_turn_is_followed_or_held(shipped):
     """With the model as trained, the novelty test (thresholds from unchanged held-out
     recordings) may take the turn for a movement the model does not know: the arm then holds
-    where it is and the interaction ends 'unexplained'; it never goes on to A's target."""
+    where it is and the interaction ends 'unexplained'; or the test speaks before the commit
+    (on a loaded machine the estimator, behind on its observations, commits later) and the
+    interaction ends with the arm never having moved. It never goes on to A's target."""
     for r in shipped['interactions']:
-        if r['end_reason'] == 'end':
-            assert r['final_plan_pattern'] == r['true_pattern'], r['name']
-        else:
-            assert r['end_reason'] == 'unexplained', (r['name'], r['end_reason'])
+        assert r['end_reason'] in ('end', 'unexplained'), (r['name'], r['end_reason'])
+        if r['end_reason'] == 'end' and r['commit_pattern'] is None:
+            assert r['commands'] == 0, r
+        elif r['end_reason'] == 'end':
+            assert r['final_plan_pattern'] == r['true_pattern'], r

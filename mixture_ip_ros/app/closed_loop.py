@@ -143,6 +143,7 @@ class ClosedLoop:
         self.sim.sim.reset_tracking()
         start = self.now()
         counts = self._sim_counts()
+        sent = self.estimator.plan_latency.count
         player = BagPlayer(context=self.context, parameter_overrides=[
             Parameter('use_sim_time', value=True)] + _params(
             {'bag': str(bag), 'rewrite_stamps': True, 'topics': [self.wrist_topic],
@@ -152,6 +153,11 @@ class ClosedLoop:
             if not player.wait_until_finished(timeout):
                 raise TimeoutError(f'playing {bag} did not finish within {timeout} s')
             self.wait_sim(settle)
+            # Every plan the estimator published is in the record: on a loaded machine the
+            # recorder's thread can lag the settle on the simulated clock.
+            self.wait_until(lambda: self.recorder.plans_received()
+                            >= self.estimator.plan_latency.count - sent, timeout,
+                            "the recorder to receive the estimator's plans")
         finally:
             self._stop(player)
             player.destroy_node()

@@ -59,6 +59,11 @@ class InteractionRecorder(Node):
             return {k: list(getattr(self, k)) for k in
                     ('joints', 'wrist', 'events', 'posterior', 'trajectories')}
 
+    def plans_received(self) -> int:
+        """How many trajectories with points arrived since the last clear (holds have none)."""
+        with self._lock:
+            return sum(len(msg.points) > 0 for _, msg in self.trajectories)
+
     def _on_joints(self, msg):
         with self._lock:
             self.joints.append((_sec(msg.header.stamp), np.array(msg.position)))
