@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from mixture_ip_ros.core.mixture import MixtureIProMP
-from mixture_ip_ros.core.novelty import NoveltyMonitor, NoveltyThresholds, calibrate
+from mixture_ip_ros.core.novelty import (GapWatch, NoveltyMonitor, NoveltyThresholds,
+                                         calibrate)
 from mixture_ip_ros.core.online import OnlineEstimator
 from mixture_ip_ros.scenarios.synthetic import mixture_demos
 
@@ -93,3 +94,55 @@ def test_calibration_bounds_every_held_out_statistic_with_a_margin(patterns):
             assert values.min() >= thresholds.prefix_threshold(n)
         lowest = min(lowest, windows.min())
     assert thresholds.window < lowest
+
+
+def test_the_gap_watch_flags_the_observation_after_a_silence_and_only_it():
+    rng = np.random.default_rng(0)
+    t = np.cumsum(0.05 + 0.01 * rng.random(40))          # 20 Hz, decimation's jitter
+    t[20:] += 0.3                                          # a 0.3 s silence before the 21st
+    watch = GapWatch(0.05)
+    assert [i for i, ti in enumerate(t) if watch.after_gap(ti)] == [20]
+    watch.reset()                                          # a slow tracker: its own spacing
+    assert not any(watch.after_gap(ti) for ti in 0.125 * np.arange(30))
+
+
+def test_observations_left_out_leave_the_statistics_of_those_judged():
+    """Against the sums written out: the left-out observations' log predictive densities are
+    removed from both statistics, which count only the judged ones."""
+    rng = np.random.default_rng(1)
+    increments = 10 + rng.normal(size=30)
+    left_out = {7, 8, 19}
+    th = NoveltyThresholds(np.full(3, -1e9), -1e9, window_size=5)
+    monitor = NoveltyMonitor(th)
+    for n, log_p in enumerate(np.cumsum(increments), start=1):
+        monitor.record(n, log_p, judged=n - 1 not in left_out)
+        kept = [x for i, x in enumerate(increments[:n]) if i not in left_out]
+        prefix, window = monitor.statistics()
+        assert monitor.n_judged == len(kept)
+        assert prefix == pytest.approx(np.mean(kept), rel=1e-12)
+        if n - 1 not in left_out and len(kept) > 5:
+            assert window == pytest.approx(np.mean(kept[-5:]), rel=1e-12)
+    monitor.record(1, increments[0])                       # a new interaction
+    assert monitor.n_judged == 1 and monitor.statistics()[0] == increments[0]
+
+
+def test_a_gap_in_the_stream_is_not_taken_for_a_movement_the_model_does_not_know(patterns):
+    """0.45 s of a held-out movement lost at a quarter of it: the first sample after the gap is
+    predicted far less sharply than the ones within the stream; it is left out, and every such
+    movement is still explained."""
+    _, test, thresholds, model = patterns
+    after, within = [], []
+    for d in test:
+        start = 0.25 * d.duration
+        keep = ~((d.t > start) & (d.t < start + 0.45))
+        est, monitor, watch = OnlineEstimator(model), NoveltyMonitor(thresholds), GapWatch(0.05)
+        before = 0.0
+        for ti, y in zip(d.t[keep], d.observed[keep]):
+            if est.update(float(ti), y):
+                gap = watch.after_gap(ti)
+                monitor.record(est.n_observations, est.log_marginal(), judged=not gap)
+                (after if gap else within).append(est.log_marginal() - before)
+                before = est.log_marginal()
+                assert monitor.unexplained() is None, d.label
+    assert len(after) == len(test)
+    assert np.median(after) < np.median(within) - 2

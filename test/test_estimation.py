@@ -1100,6 +1100,36 @@ def test_a_reach_commits_as_it_did_and_a_return_to_rest_never(trained):
         assert plain.counts.plans_sent > 0               # what the gate prevents
 
 
+def test_the_observation_after_a_gap_is_not_judged_held_or_live(trained):
+    """Two silences of 0.25 s, one among the samples held before the onset (absorbed from the
+    backlog), one live: each first sample after them is left out of the novelty statistics, as
+    the calibration leaves it out (core.novelty), and the reach commits as without the gate."""
+    from mixture_ip_ros.core.novelty import GapWatch
+    model, meta, held = trained
+    demo = held[0]
+    keep = ~(((demo.t > 0.1) & (demo.t < 0.35)) | ((demo.t > 0.7) & (demo.t < 0.95)))
+    t, Y = demo.t[keep], demo.observed[keep]
+    runs = {}
+    for novelty in (model.novelty_, None):
+        planner = OnlinePlanner(OnlineEstimator(model), PlannerSettings(), novelty=novelty)
+        before = t < 0.5
+        for ti, y in zip(t[before], Y[before]):
+            planner.observe(_ns(ti), y)
+        planner.onset(0)
+        steps = [planner.replan()]
+        for ti, y in zip(t[~before], Y[~before]):
+            planner.observe(_ns(ti), y)
+            steps.append(planner.replan())
+        runs[novelty is None] = planner, [s for s in steps if s is not None]
+    planner, steps = runs[False]
+    est, watch = OnlineEstimator(model), GapWatch(model.novelty_.min_interval)
+    used = [ti for ti, y in zip(t, Y) if est.update(float(ti), y)]
+    assert sum(watch.after_gap(ti) for ti in used) == 2
+    assert planner._novelty.n_judged == planner.estimator.n_observations - 2 == len(used) - 2
+    assert not any(s.unexplained for s in steps)
+    assert planner.current.commit_observations == runs[True][0].current.commit_observations
+
+
 def test_a_committed_robot_holds_when_the_movement_stops_being_explained(trained):
     """A second reach from where the first ended, without a rest: after the commit the movement
     becomes unexplained; the planner says hold once and the interaction ends there."""

@@ -19,6 +19,13 @@ the spread between that lowest and the median value, so that a new person's reac
 further from the training set than held-out ones, is still explained. The prefix threshold is
 per number of observations (it starts noisy and settles). Movements it refuses (returns to rest,
 transitions between reaches) are tested in the test suite and measured by bench/soak.py.
+
+An observation that follows a gap in the stream (a tracker's dropped frames, an occlusion) is
+conditioned on but not judged: after a silence the phase has spread, so the first sample is
+predicted far less sharply than one taken at the stream's own spacing (on the box assembly with
+bursts of up to 0.8 s dropped: log p about 7 on median, down to -0.6, against 10.3 within the
+stream), and the thresholds come from streams without gaps. The sample after it is predicted
+as sharply as any (median 9.8), so only the one is left out, in the calibration as online.
 """
 
 from collections import deque
@@ -31,6 +38,9 @@ from .parallel import map_threads
 
 WINDOW = 5           # observations: 0.25 s at the node's 20 Hz
 MAX_PREFIX = 40      # per-n prefix thresholds up to here, then one for every larger n
+# A spacing longer than this many of the stream's own (the median so far, at least the
+# decimation) is a gap: a dropped sample or two at the decimation's edge stays within it.
+GAP = 2.0
 
 
 @dataclass(frozen=True)
@@ -60,25 +70,66 @@ class NoveltyThresholds:
         return float(self.prefix[min(n, self.prefix.size) - 1])
 
 
+class GapWatch:
+    """Says which observations, in time order, follow a gap in the stream (GAP)."""
+
+    def __init__(self, min_interval: float):
+        self.min_interval = float(min_interval)
+        self.reset()
+
+    def reset(self) -> None:
+        self._last = None
+        self._spacings = []
+
+    def after_gap(self, t: float) -> bool:
+        """Whether the observation at ``t`` (later than every one before) follows a gap."""
+        last, self._last = self._last, float(t)
+        if last is None:
+            return False
+        spacing = float(t) - last
+        # the first spacing is the stream's own: there is none to compare it with
+        gap = bool(self._spacings) and spacing > GAP * max(self.min_interval,
+                                                           float(np.median(self._spacings)))
+        self._spacings.append(spacing)
+        return gap
+
+
 class NoveltyMonitor:
     """Follows log p(D_1:n) of one interaction and says whether the model explains it."""
 
     def __init__(self, thresholds: NoveltyThresholds):
         self.thresholds = thresholds
-        self._history = deque(maxlen=thresholds.window_size + 1)   # (n, log p(D_1:n))
+        self.reset()
 
     def reset(self) -> None:
-        self._history.clear()
+        # (observations judged, their log p) at the latest window_size + 1 records
+        self._history = deque(maxlen=self.thresholds.window_size + 1)
+        self._last = (0, 0.0)               # (n, log p(D_1:n)) at the latest record
+        self._left_out = (0, 0.0)           # observations not judged and their log p
 
-    def record(self, n: int, log_marginal: float) -> None:
-        """log p(D_1:n) after the n-th observation used (in time order, every one)."""
-        if self._history and n <= self._history[-1][0]:
-            self._history.clear()          # a new interaction, or its samples re-absorbed
-        self._history.append((int(n), float(log_marginal)))
+    def record(self, n: int, log_marginal: float, judged: bool = True) -> None:
+        """log p(D_1:n) after the n-th observation used (in time order, every one); not
+        ``judged``: the observations since the latest record are left out of the statistics
+        (they follow a gap)."""
+        if n <= self._last[0]:
+            self.reset()                    # a new interaction, or its samples re-absorbed
+        if not judged:
+            count, log_p = self._left_out
+            self._left_out = (count + n - self._last[0],
+                              log_p + float(log_marginal) - self._last[1])
+        self._last = (int(n), float(log_marginal))
+        if judged:
+            self._history.append((int(n) - self._left_out[0],
+                                  float(log_marginal) - self._left_out[1]))
+
+    @property
+    def n_judged(self) -> int:
+        return self._history[-1][0] if self._history else 0
 
     def statistics(self):
         """(prefix, window) statistics of the latest record (window None until there are
-        ``window_size`` observations after the first recorded one)."""
+        ``window_size`` observations judged after the first recorded one), over the
+        observations judged."""
         if not self._history:
             return None, None
         n, lm = self._history[-1]
@@ -92,7 +143,7 @@ class NoveltyMonitor:
         prefix, window = self.statistics()
         if prefix is None:
             return None
-        n = self._history[-1][0]
+        n = self.n_judged
         low = self.thresholds.prefix_threshold(n)
         if prefix < low:
             return (f'log p(D)/n = {prefix:.3g} below {low:.3g}, the lowest of held-out '
@@ -105,8 +156,10 @@ class NoveltyMonitor:
 
 def held_out_statistics(model, demos, *, n_alpha: int, min_interval: float,
                         window_size: int = WINDOW):
-    """Prefix statistics per n (list of arrays over demonstrations, n = 1..) and every window
-    statistic, of ``demos`` fed through an OnlineEstimator of ``model`` (the online way)."""
+    """Prefix statistics per n (list of arrays over demonstrations, n = 1.. observations
+    judged) and every window statistic, of ``demos`` fed through an OnlineEstimator of
+    ``model`` (the online way: an observation after a gap is not judged)."""
+    from mixture_ip_ros.core.noise import decimated_rows
     from mixture_ip_ros.core.online import OnlineEstimator
     from mixture_ip_ros.core.playback import observed_rows
     prefix, windows = {}, []
@@ -114,11 +167,18 @@ def held_out_statistics(model, demos, *, n_alpha: int, min_interval: float,
     for demo in demos:
         est.reset()
         monitor = NoveltyMonitor(NoveltyThresholds(np.zeros(1), 0.0, window_size, min_interval))
+        gaps = GapWatch(min_interval)
         rows = observed_rows(demo)
-        for n, log_p in enumerate(est.offer_many(demo.t[rows], demo.observed[rows]), start=1):
-            monitor.record(n, log_p)
+        t = demo.t[rows]
+        log_ps = est.offer_many(t, demo.observed[rows])
+        for n, (log_p, ti) in enumerate(zip(log_ps, t[decimated_rows(t, min_interval)]),
+                                        start=1):
+            judged = not gaps.after_gap(ti)
+            monitor.record(n, log_p, judged)
+            if not judged:
+                continue
             p, w = monitor.statistics()
-            prefix.setdefault(n, []).append(p)
+            prefix.setdefault(monitor.n_judged, []).append(p)
             if w is not None:
                 windows.append(w)
     return [np.array(prefix[n]) for n in sorted(prefix)], np.array(windows)

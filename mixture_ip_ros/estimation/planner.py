@@ -43,7 +43,7 @@ from typing import Optional
 
 import numpy as np
 
-from mixture_ip_ros.core.novelty import NoveltyMonitor, NoveltyThresholds
+from mixture_ip_ros.core.novelty import GapWatch, NoveltyMonitor, NoveltyThresholds
 from mixture_ip_ros.estimation.held import HeldSamples
 from mixture_ip_ros.estimation.horizon import within_horizon
 from mixture_ip_ros.estimation.planner_settings import PlannerSettings
@@ -88,6 +88,7 @@ class OnlinePlanner:
         self.limits = limits
         # Commit only to movements the model explains (core.novelty); None: on confidence alone.
         self._novelty = None if novelty is None else NoveltyMonitor(novelty)
+        self._gaps = None if novelty is None else GapWatch(novelty.min_interval)
         self.robot_state = None   # the arm's latest (joints, joint speeds), set by the node
         self._inputs = StaleInputs()
         self.state = 'idle'
@@ -96,7 +97,7 @@ class OnlinePlanner:
         self._settings = settings
         self._held = HeldSamples(settings.hold_window)
         self._schedule = ReplanSchedule(settings.replan_period, settings.replan_on_observation)
-        self._backlog = deque()   # (t, y) admitted at the onset, not yet absorbed
+        self._backlog = deque()   # (t, y, judged) admitted at the onset, not yet absorbed
         self._onset_ns = None
         self._t_latest = None     # latest observation time (s since onset), used or skipped
         self._y_latest = None     # and the observed position then
@@ -176,6 +177,7 @@ class OnlinePlanner:
         self.estimator.reset()
         if self._novelty is not None:
             self._novelty.reset()
+            self._gaps.reset()
         self._schedule.restart()
         self._onset_ns = int(stamp_ns)
         self._t_latest = self._y_latest = self._ended = None
@@ -267,8 +269,9 @@ class OnlinePlanner:
         if not self._backlog:
             return False
         for _ in range(min(len(self._backlog), n or self._settings.backlog_slice)):
-            self.estimator.absorb(*self._backlog.popleft())
-        self._record_evidence()
+            t, y, judged = self._backlog.popleft()
+            self.estimator.absorb(t, y)
+            self._record_evidence(judged)
         self._dirty = True
         if self._backlog:
             return False
@@ -286,9 +289,11 @@ class OnlinePlanner:
             return self._rejected_in_interaction('time_backwards')
         try:
             used = self.estimator.admit(t)
+            # in time order, as admitted: whether it follows a gap (core.novelty)
+            judged = not (used and self._gaps is not None and self._gaps.after_gap(t))
             if used and not defer:
                 self.estimator.absorb(t, y)
-                self._record_evidence()
+                self._record_evidence(judged)
                 if not self._backlog:
                     self.estimator.prune()
         except ValueError:
@@ -299,7 +304,7 @@ class OnlinePlanner:
         self._dirty = True
         if used:
             if defer:
-                self._backlog.append((t, y))
+                self._backlog.append((t, y, judged))
             self.counts.used += 1
             rec.n_observations += 1
             return 'used'
@@ -307,9 +312,10 @@ class OnlinePlanner:
         rec.n_skipped += 1
         return 'skipped'
 
-    def _record_evidence(self):
+    def _record_evidence(self, judged: bool):
         if self._novelty is not None:
-            self._novelty.record(self.estimator.n_observations, self.estimator.log_marginal())
+            self._novelty.record(self.estimator.n_observations, self.estimator.log_marginal(),
+                                 judged)
 
     def _rejected_in_interaction(self, reason):
         if self.active:
