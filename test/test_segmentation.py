@@ -221,6 +221,28 @@ def test_recording_stopping_while_moving():
     assert abs(end2 - true_end) < 0.1
 
 
+def test_a_silence_at_rest_confirms_the_end_as_samples_at_rest_would():
+    """The hand comes to rest and the tracker loses it before the rest is long enough to
+    confirm: the silence counts as rest, and the end is the one the recording's end gives
+    (dated from the same samples), online as offline; a silence at speed does not end it."""
+    t, p, true_on, true_end = reach(500, 0.4, 1.0, seed=6)
+    short = t < true_end + 0.15
+    onset, end = segment_motion(t[short], p[short])           # the recording stops there
+    seg = MotionSegmenter()
+    assert [ev.kind for ev, _ in run_stream(seg, t[short], p[short])] == ['onset']
+    last = float(t[short][-1])
+    assert seg.gap(last + 0.11) == [Event('gap', last)] and seg.moving
+    assert seg.gap(last + seg.end_hold) == [Event('end', end)] and not seg.moving
+    assert abs(end - true_end) < 0.1
+    lost = (t >= true_end + 0.15) & (t < true_end + 0.75)     # offline: the samples come back
+    assert segment_motion(t[~lost], p[~lost]) == (onset, end)
+    fast = t < true_on + 0.5
+    seg = MotionSegmenter()
+    run_stream(seg, t[fast], p[fast])
+    assert seg.gap(float(t[fast][-1]) + 1.0) == [Event('gap', float(t[fast][-1]))]
+    assert seg.moving
+
+
 def test_onset_never_before_stream_start():
     t, p, true_on, _ = reach(500, 0.4, 1.0, seed=8)
     late = t > true_on + 0.15  # recording starts with the hand already moving

@@ -62,7 +62,10 @@ class MotionSegmenter:
     - 'gap' at the last sample time when the stream was silent for more than ``gap_timeout``
       (also announced early by ``gap(t_now)``). The velocity window restarts after a gap,
       an interaction in progress continues; after more than ``max_gap`` of silence it is
-      closed with an 'end' at the last sample time (tracking is lost).
+      closed with an 'end' at the last sample time (tracking is lost). A silence that falls
+      while the hand is at rest counts as rest: once ``end_hold`` has passed since the rest
+      began, the end is confirmed and dated from the samples, as if they had gone on at rest
+      (a tracker losing the hand at the end of a reach, a recording stopping there).
     - 'onset' once speed has stayed >= ``onset_speed`` for ``onset_hold`` seconds; its time
       is back-dated to when the hand left rest (cubic fit, see the module notes), never
       more than ``max_backdate`` before the sample that confirmed it, nor before the
@@ -269,7 +272,12 @@ class MotionSegmenter:
         if not self._gap_reported:
             events.append(Event('gap', self._last_t))
             self._gap_reported = True
-        if self._moving and duration > self.max_gap + _SLACK:
+        if not self._moving:
+            return events
+        if self._rest_start_t is not None and \
+                self._last_t + duration - self._rest_start_t >= self.end_hold - _SLACK:
+            events.append(self._close(self._date_end(self._last_t)))
+        elif duration > self.max_gap + _SLACK:
             events.append(self._close(self._last_t))
         return events
 
