@@ -185,6 +185,6 @@ def test_with_the_novelty_test_a_turn_is_followed_or_held(shipped):
     for r in shipped['interactions']:
         assert r['end_reason'] in ('end', 'unexplained'), (r['name'], r['end_reason'])
         if r['end_reason'] == 'end' and r['commit_pattern'] is None:
-            assert r['commands'] == 0, r
+            assert r['commands'] == 0 and r['unexplained'] is not None, r
         elif r['end_reason'] == 'end':
             assert r['final_plan_pattern'] == r['true_pattern'], r

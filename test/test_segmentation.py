@@ -223,8 +223,8 @@ def test_recording_stopping_while_moving():
 
 def test_a_silence_at_rest_confirms_the_end_as_samples_at_rest_would():
     """The hand comes to rest and the tracker loses it before the rest is long enough to
-    confirm: the silence counts as rest, and the end is the one the recording's end gives
-    (dated from the same samples), online as offline; a silence at speed does not end it."""
+    confirm: a silence of end_hold confirms the end the recording's end gives (dated from the
+    same samples), online as offline, once; a shorter one, or one at speed, does not."""
     t, p, true_on, true_end = reach(500, 0.4, 1.0, seed=6)
     short = t < true_end + 0.15
     onset, end = segment_motion(t[short], p[short])           # the recording stops there
@@ -232,10 +232,15 @@ def test_a_silence_at_rest_confirms_the_end_as_samples_at_rest_would():
     assert [ev.kind for ev, _ in run_stream(seg, t[short], p[short])] == ['onset']
     last = float(t[short][-1])
     assert seg.gap(last + 0.11) == [Event('gap', last)] and seg.moving
+    assert seg.gap(last + seg.end_hold - 0.01) == [] and seg.moving
     assert seg.gap(last + seg.end_hold) == [Event('end', end)] and not seg.moving
+    assert seg.gap(last + 1.0) == []
     assert abs(end - true_end) < 0.1
     lost = (t >= true_end + 0.15) & (t < true_end + 0.75)     # offline: the samples come back
     assert segment_motion(t[~lost], p[~lost]) == (onset, end)
+    seg = MotionSegmenter()
+    kinds = [ev.kind for ev, _ in run_stream(seg, t[~lost], p[~lost])]
+    assert kinds == ['onset', 'gap', 'end']
     fast = t < true_on + 0.5
     seg = MotionSegmenter()
     run_stream(seg, t[fast], p[fast])

@@ -113,6 +113,7 @@ def replay_splice(loop, folder: Path, name: str, recipe: dict, data_dir: Path, k
            # the pattern of the plan the arm got at the end (None: it got none, e.g. it held)
            'final_plan_pattern': rec.chosen_pattern if rec.extra['final_plan_received'] else None,
            'end_reason': inter.get('end_reason'),
+           'unexplained': inter.get('unexplained'),      # the novelty test's latest reason
            'switches': [{'after_onset_s': s['elapsed'], 'phase': s['phase'],
                          'from': labels[s['from_component']], 'to': labels[s['to_component']]}
                         for s in inter.get('switches', [])],

@@ -21,8 +21,8 @@ per number of observations (it starts noisy and settles). Movements it refuses (
 transitions between reaches) are tested in the test suite and measured by bench/soak.py.
 
 An observation that follows a gap in the stream (a tracker's dropped frames, an occlusion) is
-conditioned on but not judged: after a silence the phase has spread, so the first sample is
-predicted far less sharply than one taken at the stream's own spacing (on the box assembly with
+conditioned on but not judged (GapWatch): after a silence the phase has spread, so the first
+sample is predicted far less sharply than one taken at the stream's own spacing (on the box assembly with
 bursts of up to 0.8 s dropped: log p about 7 on median, down to -0.6, against 10.3 within the
 stream), and the thresholds come from streams without gaps. The sample after it is predicted
 as sharply as any (median 9.8), so only the one is left out, in the calibration as online.
@@ -39,8 +39,9 @@ from .parallel import map_threads
 WINDOW = 5           # observations: 0.25 s at the node's 20 Hz
 MAX_PREFIX = 40      # per-n prefix thresholds up to here, then one for every larger n
 # A spacing longer than this many of the stream's own (the median so far, at least the
-# decimation) is a gap: a dropped sample or two at the decimation's edge stays within it.
-GAP = 2.0
+# decimation) is a gap: a 20 Hz tracker's sample skipped by the decimation (twice its spacing,
+# give or take its jitter) stays within it.
+GAP = 2.5
 
 
 @dataclass(frozen=True)

@@ -62,10 +62,10 @@ class MotionSegmenter:
     - 'gap' at the last sample time when the stream was silent for more than ``gap_timeout``
       (also announced early by ``gap(t_now)``). The velocity window restarts after a gap,
       an interaction in progress continues; after more than ``max_gap`` of silence it is
-      closed with an 'end' at the last sample time (tracking is lost). A silence that falls
-      while the hand is at rest counts as rest: once ``end_hold`` has passed since the rest
-      began, the end is confirmed and dated from the samples, as if they had gone on at rest
-      (a tracker losing the hand at the end of a reach, a recording stopping there).
+      closed with an 'end' at the last sample time (tracking is lost). A silence of
+      ``end_hold`` that falls once the hand has come to rest confirms the end, dated from the
+      samples as a recording that stops there is (a tracker losing the hand at the end of a
+      reach); at speed, or after a shorter silence, the interaction goes on.
     - 'onset' once speed has stayed >= ``onset_speed`` for ``onset_hold`` seconds; its time
       is back-dated to when the hand left rest (cubic fit, see the module notes), never
       more than ``max_backdate`` before the sample that confirmed it, nor before the
@@ -274,8 +274,7 @@ class MotionSegmenter:
             self._gap_reported = True
         if not self._moving:
             return events
-        if self._rest_start_t is not None and \
-                self._last_t + duration - self._rest_start_t >= self.end_hold - _SLACK:
+        if self._rest_start_t is not None and duration >= self.end_hold - _SLACK:
             events.append(self._close(self._date_end(self._last_t)))
         elif duration > self.max_gap + _SLACK:
             events.append(self._close(self._last_t))

@@ -289,7 +289,9 @@ class OnlinePlanner:
             return self._rejected_in_interaction('time_backwards')
         try:
             used = self.estimator.admit(t)
-            # in time order, as admitted: whether it follows a gap (core.novelty)
+            # in time order, as admitted: whether it follows a gap (core.novelty). Held samples
+            # absorbed after live ones keep their flags; their evidence is that of the order
+            # absorbed (the whole is the same), as the statistics during a backlog always were.
             judged = not (used and self._gaps is not None and self._gaps.after_gap(t))
             if used and not defer:
                 self.estimator.absorb(t, y)
