@@ -5,6 +5,7 @@ unseen pattern, a second reach without a rest)."""
 import numpy as np
 import pytest
 
+from mixture_ip_ros.core.demonstration import Demonstration
 from mixture_ip_ros.core.mixture import MixtureIProMP
 from mixture_ip_ros.core.novelty import (GapWatch, NoveltyMonitor, NoveltyThresholds,
                                          calibrate)
@@ -146,3 +147,31 @@ def test_a_gap_in_the_stream_is_not_taken_for_a_movement_the_model_does_not_know
                 assert monitor.unexplained() is None, d.label
     assert len(after) == len(test)
     assert np.median(after) < np.median(within) - 2
+
+
+def test_calibration_leaves_out_the_sample_after_a_gap_as_the_monitor_does(patterns):
+    """held_out_statistics on a demonstration with 0.45 s of missing rows (NaN): the prefix
+    statistics per number of samples judged, against the log predictive densities summed by
+    hand in time order without the first sample after the gap."""
+    from mixture_ip_ros.core.novelty import held_out_statistics
+    _, test, _, model = patterns
+    d = test[0]
+    observed = d.observed.copy()
+    start = 0.25 * d.duration
+    observed[(d.t > start) & (d.t < start + 0.45)] = np.nan
+    demo = Demonstration(d.t, observed, d.controlled, d.label)
+    by_n, windows = held_out_statistics(model, [demo], n_alpha=50, min_interval=0.05)
+    est, before, kept, after_gap = OnlineEstimator(model), 0.0, [], False
+    last = None
+    for ti, y in zip(demo.t, demo.observed):
+        if np.isnan(y).any() or not est.update(float(ti), y):
+            continue
+        after_gap = last is not None and ti - last > 0.2
+        last = ti
+        if not after_gap:
+            kept.append(est.log_marginal() - before)
+        before = est.log_marginal()
+    assert len(by_n) == len(kept) == est.n_observations - 1       # one left out
+    for n, values in enumerate(by_n, start=1):
+        assert values[0] == pytest.approx(np.mean(kept[:n]), rel=1e-9)
+    assert windows[-1] == pytest.approx(np.mean(kept[-5:]), rel=1e-9)

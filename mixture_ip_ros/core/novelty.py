@@ -22,10 +22,11 @@ transitions between reaches) are tested in the test suite and measured by bench/
 
 An observation that follows a gap in the stream (a tracker's dropped frames, an occlusion) is
 conditioned on but not judged (GapWatch): after a silence the phase has spread, so the first
-sample is predicted far less sharply than one taken at the stream's own spacing (on the box assembly with
-bursts of up to 0.8 s dropped: log p about 7 on median, down to -0.6, against 10.3 within the
-stream), and the thresholds come from streams without gaps. The sample after it is predicted
-as sharply as any (median 9.8), so only the one is left out, in the calibration as online.
+sample is predicted far less sharply than one taken at the stream's own spacing (on the box
+assembly with bursts of up to 0.8 s dropped: log p about 7 on median, down to -0.6, against
+10.3 within the stream), and the thresholds come from streams without gaps. The sample after
+it is predicted as sharply as any (median 9.8), so only the one is left out, in the
+calibration as online.
 """
 
 from collections import deque
