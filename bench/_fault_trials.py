@@ -87,6 +87,11 @@ def kill_trial(model, domain, bag, next_bag, labels, node, phase, log_dir) -> di
     p = ns.probe
     try:
         ns.start()
+        # the sim's counts before the interaction, while no command is on its way
+        since = p.seq
+        ns.wait(lambda: latest(p.diagnostics, 'sim_node', since) is not None, 10.0,
+                'a sim report')
+        sim_start = latest(p.diagnostics, 'sim_node')
         plans0, events0 = len(p.plans), len(p.events)
         ns.play(bag)
         ns.wait(lambda: _first_plan(p, plans0) is not None, 60.0, 'the first plan')
@@ -110,15 +115,17 @@ def kill_trial(model, domain, bag, next_bag, labels, node, phase, log_dir) -> di
                     or p.now >= t_kill + 10.0, 60.0, 'the arm watched after the kill')
             row.update(after_kill(p.t[seq - 1:], p.q[seq - 1:], p.qd[seq - 1:], t_kill, kin))
             row.update(_plans_after(p, plans_kill, ns.kill_ns))
-            # commands the sim took after the kill: its count since its last report before
-            # the kill, less the plans that came between that report and the kill
+            # commands the sim took after the kill: its count since its report before the
+            # interaction, less the plans sent before the kill (a report during the
+            # interaction can count a plan the probe has yet to receive)
             ns.wait(lambda: latest(p.diagnostics, 'sim_node', p.seq) is not None, 10.0,
                     'a sim report')
             sim_after = latest(p.diagnostics, 'sim_node')
-            between = sum(not c['empty'] and not c['stray'] and c['seq'] >= sim_before['seq']
-                          and c['sent_ns'] <= ns.kill_ns for c in p.plans)
+            before_kill = sum(not c['empty'] and not c['stray'] and c['seq'] >= sim_start['seq']
+                              and c['sent_ns'] <= ns.kill_ns for c in p.plans)
             row['sim_accepted_after_kill'] = (count(sim_after, 'commands_accepted')
-                                              - count(sim_before, 'commands_accepted') - between)
+                                              - count(sim_start, 'commands_accepted')
+                                              - before_kill)
             row['sim_holds_source_lost'] = (count(sim_after, 'holds_source_lost')
                                             - count(sim_before, 'holds_source_lost'))
             row['sim_liveliness_lapses'] = (count(sim_after, 'liveliness_lapses')
