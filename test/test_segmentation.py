@@ -320,12 +320,12 @@ def test_invalid_input_is_rejected():
 def test_rest_statistics_median_is_numpys():
     """The rest level and spread come from sorted lists: np.median's values exactly (odd and
     even counts, ties)."""
-    from mixture_ip_ros.core.segmentation import _median_sorted
+    from mixture_ip_ros.core.segmentation import median_sorted
     rng = np.random.default_rng(2)
     for n in list(range(1, 40)) + [99, 100, 500, 501]:
         v = np.abs(rng.normal(0.05, 0.02, n))
         v[rng.integers(n, size=n // 3)] = v[0]
-        level = _median_sorted(sorted(v.tolist()))
+        level = median_sorted(sorted(v.tolist()))
         assert level == float(np.median(v))
-        assert _median_sorted(sorted(abs(x - level) for x in v.tolist())) == \
+        assert median_sorted(sorted(abs(x - level) for x in v.tolist())) == \
             float(np.median(np.abs(v - level)))

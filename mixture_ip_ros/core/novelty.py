@@ -29,6 +29,7 @@ it is predicted as sharply as any (median 9.8), so only the one is left out, in 
 calibration as online.
 """
 
+import bisect
 from collections import deque
 from dataclasses import dataclass
 from typing import Optional
@@ -36,6 +37,7 @@ from typing import Optional
 import numpy as np
 
 from .parallel import map_threads
+from .segmentation import median_sorted
 
 WINDOW = 5           # observations: 0.25 s at the node's 20 Hz
 MAX_PREFIX = 40      # per-n prefix thresholds up to here, then one for every larger n
@@ -91,8 +93,8 @@ class GapWatch:
         spacing = float(t) - last
         # the first spacing is the stream's own: there is none to compare it with
         gap = bool(self._spacings) and spacing > GAP * max(self.min_interval,
-                                                           float(np.median(self._spacings)))
-        self._spacings.append(spacing)
+                                                           median_sorted(self._spacings))
+        bisect.insort(self._spacings, spacing)     # kept sorted: the median per sample is O(1)
         return gap
 
 

@@ -41,7 +41,7 @@ from .cubic_onset import fit_cubic_onset
 _SLACK = 1e-6
 
 
-def _median_sorted(v) -> float:
+def median_sorted(v) -> float:
     """The median of the sorted list ``v`` as np.median computes it."""
     n = len(v)
     return v[n // 2] if n % 2 else (v[n // 2 - 1] + v[n // 2]) / 2
@@ -256,8 +256,8 @@ class MotionSegmenter:
             # np.median's values (the middle one, or the mean of the two middle ones) from a
             # sorted list, without numpy's per-call overhead at every sample.
             v = sorted([r[1] for r in self._rest])
-            level = _median_sorted(v)
-            spread = 1.4826 * _median_sorted(sorted([abs(x - level) for x in v]))
+            level = median_sorted(v)
+            spread = 1.4826 * median_sorted(sorted([abs(x - level) for x in v]))
             self._on_thr = max(self.onset_speed, level + self.onset_noise_factor * spread)
             self._end_thr = max(self.end_speed, level + self.end_noise_factor * spread)
 
